@@ -1,0 +1,1 @@
+"""ALV visual homing: landmark vectors, home vectors, visual compasses, the thesis simulation."""

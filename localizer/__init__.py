@@ -1,0 +1,1 @@
+"""Panorama geometry, features, matching, the belief over rooms and the disambiguation policy."""

@@ -1,0 +1,249 @@
+"""Building a map from a dataset: hash, extract in worker processes, write each place whole.
+
+The pipeline (``build_map``):
+
+1. Hash every image (SHA-256 of the file bytes) in the parent; an image already in the map, or
+   repeated in the dataset, is *skipped* and said so; an unreadable file *failed*.
+2. Extract fingerprints with the injected ``extract(path) -> list[Fingerprint]`` in a
+   ``ProcessPoolExecutor`` (at most ``2 * workers`` images in flight, so memory stays bounded);
+   ``workers <= 1`` runs in-process. ``extract`` must be picklable (a module-level function or a
+   ``functools.partial`` of one) and raises (e.g. ``ValueError``) for a bad image: *failed*.
+3. The parent writes each place with its fingerprints in one transaction (all or nothing).
+
+Interrupting (Ctrl-C) or killing the process loses at most the places not yet committed; every
+committed place is complete, and re-running the build adds the rest. Database faults (full disk,
+lock, read-only) and a dead worker process stop the build with a
+:class:`~mapdb.errors.MapDatabaseError`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import closing
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from enum import Enum
+from pathlib import Path
+
+from tqdm import tqdm
+
+from localizer.fingerprint import Fingerprint
+from mapdb.database import MapDatabase
+from mapdb.dataset import ManifestEntry, sha256_file
+from mapdb.errors import BuildAbortedError, DuplicatePlaceError
+from mapdb.records import NewPlace
+
+Extractor = Callable[[Path], list[Fingerprint]]
+
+
+class Status(Enum):
+    """What happened to one image of a build."""
+
+    ADDED = "added"
+    SKIPPED = "skipped"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """The result for one image: its manifest name, status, place id (if any) and why."""
+
+    image: str
+    status: Status
+    place_id: int | None = None
+    message: str = ""
+
+    def describe(self) -> str:
+        """One line for a log: ``"<status> <image>: <message>"``."""
+        return f"{self.status.value} {self.image}: {self.message}"
+
+
+@dataclass
+class BuildReport:
+    """Outcomes of a build, in the order they happened; ``interrupted`` after Ctrl-C."""
+
+    outcomes: list[Outcome] = field(default_factory=list)
+    interrupted: bool = False
+
+    def count(self, status: Status) -> int:
+        """Number of images with ``status``."""
+        return sum(1 for outcome in self.outcomes if outcome.status is status)
+
+    @property
+    def ok(self) -> bool:
+        """True when no image failed and the build ran to the end."""
+        return not self.interrupted and self.count(Status.FAILED) == 0
+
+    def summary(self) -> str:
+        """``"added A, skipped S, failed F"`` (plus ``", interrupted"``)."""
+        text = ", ".join(f"{s.value} {self.count(s)}" for s in Status)
+        return text + (", interrupted" if self.interrupted else "")
+
+
+@dataclass(frozen=True)
+class _Job:
+    entry: ManifestEntry
+    image_sha256: str
+
+
+def file_mtime_utc(path: Path) -> str | None:
+    """The file's modification time as ISO-8601 UTC text (the capture time we can know)."""
+    try:
+        mtime_s = path.stat().st_mtime
+    except OSError:
+        return None
+    return datetime.fromtimestamp(mtime_s, UTC).isoformat(timespec="seconds")
+
+
+def _error_text(error: BaseException) -> str:
+    """A one-line reason; the type name is added unless it is a plain value or OS error."""
+    text = str(error) or type(error).__name__
+    return text if isinstance(error, ValueError | OSError) else f"{type(error).__name__}: {text}"
+
+
+def plan_jobs(
+    entries: Iterable[ManifestEntry], known_hashes: dict[str, int]
+) -> tuple[list[_Job], list[Outcome]]:
+    """Hash each image; return the jobs to extract and the outcomes already decided.
+
+    Decided: unreadable (failed), already in the map or repeated in the dataset (skipped).
+    """
+    jobs: list[_Job] = []
+    decided: list[Outcome] = []
+    seen: dict[str, str] = {}
+    for entry in entries:
+        try:
+            sha = sha256_file(entry.path)
+        except OSError as error:
+            reason = f"cannot read {entry.path}: {error.strerror or error}"
+            decided.append(Outcome(entry.image, Status.FAILED, message=reason))
+            continue
+        if sha in known_hashes:
+            place_id = known_hashes[sha]
+            message = f"already in the map as place {place_id}"
+            decided.append(Outcome(entry.image, Status.SKIPPED, place_id, message))
+        elif sha in seen:
+            message = f"same image as {seen[sha]} earlier in this dataset"
+            decided.append(Outcome(entry.image, Status.SKIPPED, message=message))
+        else:
+            seen[sha] = entry.image
+            jobs.append(_Job(entry, sha))
+    return jobs, decided
+
+
+def _extract_serial(
+    jobs: Sequence[_Job], extract: Extractor
+) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
+    for job in jobs:
+        try:
+            yield job, extract(job.entry.path)
+        except Exception as error:  # a bad image must not stop the others
+            yield job, error
+
+
+def _extract_parallel(
+    jobs: Sequence[_Job], extract: Extractor, workers: int
+) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
+    """Results as they complete, with at most ``2 * workers`` jobs submitted at a time."""
+    pending = iter(jobs)
+    pool = ProcessPoolExecutor(max_workers=workers)
+    in_flight: dict[Future[list[Fingerprint]], _Job] = {}
+    finished = False
+
+    def submit_next() -> None:
+        job = next(pending, None)
+        if job is not None:
+            in_flight[pool.submit(extract, job.entry.path)] = job
+
+    try:
+        for _ in range(2 * workers):
+            submit_next()
+        while in_flight:
+            done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in done:
+                job = in_flight.pop(future)
+                submit_next()
+                try:
+                    result: list[Fingerprint] | Exception = future.result()
+                except BrokenProcessPool:
+                    raise
+                except Exception as error:  # raised by extract in the worker
+                    result = error
+                yield job, result
+        finished = True
+    finally:
+        pool.shutdown(wait=finished, cancel_futures=True)
+
+
+def build_map(
+    map_db: MapDatabase,
+    entries: Sequence[ManifestEntry],
+    extract: Extractor,
+    *,
+    workers: int = 2,
+    progress: bool = True,
+    on_outcome: Callable[[Outcome], None] | None = None,
+) -> BuildReport:
+    """Add every entry's panorama to ``map_db`` (see the module docstring); return the report.
+
+    ``on_outcome`` is called for every image as soon as its fate is known (for logging; use
+    ``tqdm.write`` to print under the progress bar). Ctrl-C ends the build cleanly with
+    ``report.interrupted`` set; the place being written, if any, is rolled back.
+    """
+    report = BuildReport()
+
+    def record(outcome: Outcome, bar: tqdm) -> None:
+        report.outcomes.append(outcome)
+        bar.update(1)
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    with tqdm(total=len(entries), unit="pano", disable=not progress, leave=False) as bar:
+        try:
+            jobs, decided = plan_jobs(entries, map_db.image_hashes())
+            for outcome in decided:
+                record(outcome, bar)
+            if workers <= 1 or len(jobs) <= 1:
+                results = _extract_serial(jobs, extract)
+            else:
+                results = _extract_parallel(jobs, extract, workers)
+            with closing(results):
+                for job, result in results:
+                    record(_store(map_db, job, result), bar)
+        except KeyboardInterrupt:
+            report.interrupted = True
+        except BrokenProcessPool as error:
+            added = report.count(Status.ADDED)
+            raise BuildAbortedError(
+                f"a feature-extraction worker process died ({error}); the {added} places "
+                f"added to {map_db.path} are complete: re-run the build to continue",
+                map_db.path,
+            ) from error
+    return report
+
+
+def _store(map_db: MapDatabase, job: _Job, result: list[Fingerprint] | Exception) -> Outcome:
+    """Write one extracted panorama as a place (one transaction) and say what happened."""
+    entry = job.entry
+    if isinstance(result, Exception):
+        return Outcome(entry.image, Status.FAILED, message=_error_text(result))
+    place = NewPlace(
+        room=entry.room,
+        image_sha256=job.image_sha256,
+        source=str(entry.path.resolve()),
+        x_m=entry.x_m,
+        y_m=entry.y_m,
+        heading_deg=entry.heading_deg,
+        captured_utc=file_mtime_utc(entry.path),
+    )
+    try:
+        place_id = map_db.add_place(place, result)
+    except DuplicatePlaceError as error:
+        message = f"already in the map as place {error.place_id}"
+        return Outcome(entry.image, Status.SKIPPED, error.place_id, message)
+    except ValueError as error:
+        return Outcome(entry.image, Status.FAILED, message=_error_text(error))
+    counts = ", ".join(f"{f.detector} {f.n}" for f in result)
+    return Outcome(entry.image, Status.ADDED, place_id, f"room {entry.room!r}, {counts}")

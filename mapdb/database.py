@@ -1,0 +1,352 @@
+"""The SQLite adapter: open a map file, migrate it, and read and write rooms, edges and places.
+
+One :class:`MapDatabase` wraps one ``sqlite_utils.Database`` connection in WAL mode with foreign
+keys on. Every write runs in a ``BEGIN IMMEDIATE`` transaction that either commits whole or
+rolls back; every ``sqlite3`` error is re-raised as a :class:`~mapdb.errors.MapDatabaseError`
+naming the file. Fast bulk reads of fingerprints live in :mod:`mapdb.loading`.
+"""
+
+from __future__ import annotations
+
+import functools
+import sqlite3
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, ParamSpec, TypeVar
+from urllib.parse import quote
+
+import sqlite_utils
+
+from localizer.fingerprint import Fingerprint
+from mapdb.codec import fingerprint_to_row
+from mapdb.errors import (
+    DuplicatePlaceError,
+    MapDatabaseError,
+    MapFileNotFoundError,
+    NotAMapDatabaseError,
+    SchemaVersionError,
+    UnknownPlaceError,
+    UnknownRoomError,
+    translate_sqlite_error,
+)
+from mapdb.records import MapInfo, NewPlace, Place, RoomSummary
+from mapdb.schema import MIGRATIONS, SCHEMA_VERSION, Migration, migrate, read_schema_version
+
+_SELECT_PLACES = (
+    "SELECT p.id, r.name, p.x_m, p.y_m, p.heading_deg, p.image_sha256, p.image_width_px, "
+    "p.image_height_px, p.captured_utc, p.source, p.added_utc "
+    "FROM places p JOIN rooms r ON r.id = p.room_id"
+)
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+
+def utc_now_iso() -> str:
+    """The current time as ISO-8601 UTC text with seconds."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _translated(method: Callable[P, R]) -> Callable[P, R]:
+    """Re-raise ``sqlite3.Error`` from a :class:`MapDatabase` method as a MapDatabaseError."""
+
+    @functools.wraps(method)
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+        try:
+            return method(*args, **kwargs)
+        except sqlite3.Error as error:
+            self = args[0]
+            assert isinstance(self, MapDatabase)
+            raise translate_sqlite_error(error, self.path) from error
+
+    return wrapper
+
+
+def _connect(path: Path, readonly: bool, busy_timeout_s: float) -> sqlite_utils.Database:
+    """Open the SQLite connection (read-only through a ``mode=ro`` URI) and set its pragmas."""
+    if readonly:
+        conn = sqlite3.connect(f"file:{quote(str(path.resolve()))}?mode=ro", uri=True)
+    else:
+        conn = sqlite3.connect(str(path))
+    db = sqlite_utils.Database(conn, execute_plugins=False)
+    db.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
+    db.execute("PRAGMA foreign_keys = ON")
+    return db
+
+
+class MapDatabase:
+    """An open map database. Use :meth:`open`; close it (or use ``with``) when done."""
+
+    def __init__(self, db: sqlite_utils.Database, path: Path, readonly: bool) -> None:
+        self.db = db
+        self.path = path
+        self.readonly = readonly
+
+    @classmethod
+    def open(
+        cls,
+        path: Path | str,
+        *,
+        create: bool = True,
+        readonly: bool = False,
+        busy_timeout_s: float = 5.0,
+        migrations: Sequence[Migration] = MIGRATIONS,
+    ) -> MapDatabase:
+        """Open (and create, unless ``create`` is False) the map at ``path``, migrating it.
+
+        Checks before writing anything: a file that is not SQLite or not a toploc map raises
+        :class:`NotAMapDatabaseError`, a newer schema :class:`SchemaVersionError`; the file is
+        left untouched. ``readonly`` opens with ``mode=ro`` and never migrates.
+        """
+        path = Path(path)
+        if (readonly or not create) and not path.exists():
+            raise MapFileNotFoundError(f"map database {path} does not exist", path)
+        if path.is_dir():
+            raise MapDatabaseError(f"{path} is a directory, not a map database file", path)
+        try:
+            db = _connect(path, readonly, busy_timeout_s)
+        except sqlite3.Error as error:
+            raise translate_sqlite_error(error, path) from error
+        try:
+            cls._prepare(db, path, readonly, migrations)
+        except sqlite3.Error as error:
+            db.close()
+            raise translate_sqlite_error(error, path) from error
+        except BaseException:
+            db.close()
+            raise
+        return cls(db, path, readonly)
+
+    @staticmethod
+    def _prepare(
+        db: sqlite_utils.Database, path: Path, readonly: bool, migrations: Sequence[Migration]
+    ) -> None:
+        """Check the schema version, then (if writable) switch to WAL and migrate."""
+        version = read_schema_version(db)
+        known = len(migrations)
+        if version is None:
+            raise NotAMapDatabaseError(
+                f"{path} is an SQLite database but not a toploc map (no schema version in "
+                f"its 'meta' table)",
+                path,
+            )
+        if version > known:
+            raise SchemaVersionError(
+                f"{path} has map schema version {version}, newer than this toploc supports "
+                f"({known}); upgrade toploc to use it. The file was not changed.",
+                path,
+            )
+        if readonly and version == 0:
+            raise NotAMapDatabaseError(f"{path} is empty, not a toploc map", path)
+        if readonly and version < known:
+            raise SchemaVersionError(
+                f"{path} has map schema version {version}, older than {known}; open it for "
+                f"writing once (e.g. `toploc map add` or `map connect`) to migrate it",
+                path,
+            )
+        if not readonly:
+            db.enable_wal()
+            migrate(db, migrations)
+
+    def close(self) -> None:
+        """Close the connection; uncommitted work (there is none outside a transaction) is lost."""
+        self.db.close()
+
+    def __enter__(self) -> MapDatabase:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    @contextmanager
+    def transaction(self) -> Iterator[sqlite_utils.Database]:
+        """A write transaction (``BEGIN IMMEDIATE``): commits on success, rolls back on any error.
+
+        SQLite errors (including at ``COMMIT``, such as a full disk) are raised translated.
+        """
+        try:
+            self.db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self.db
+                self.db.execute("COMMIT")
+            except BaseException:
+                if self.db.conn.in_transaction:
+                    self.db.execute("ROLLBACK")
+                raise
+        except sqlite3.Error as error:
+            raise translate_sqlite_error(error, self.path) from error
+
+    @_translated
+    def schema_version(self) -> int:
+        """The schema version stored in the file."""
+        return read_schema_version(self.db) or 0
+
+    def _room_id(self, name: str) -> int | None:
+        row = self.db.execute("SELECT id FROM rooms WHERE name = ?", [name]).fetchone()
+        return None if row is None else int(row[0])
+
+    @_translated
+    def room_id(self, name: str) -> int:
+        """The id of room ``name``; raises :class:`UnknownRoomError` if there is none."""
+        room_id = self._room_id(name)
+        if room_id is None:
+            raise UnknownRoomError(name, self.path)
+        return room_id
+
+    def _ensure_room(self, name: str) -> int:
+        """Id of room ``name``, inserting it if new; call inside :meth:`transaction`."""
+        room_id = self._room_id(name)
+        if room_id is not None:
+            return room_id
+        table = self.db["rooms"].insert({"name": name, "created_utc": utc_now_iso()})
+        return int(table.last_pk)
+
+    def add_room(self, name: str) -> int:
+        """Add room ``name`` if it is new (one transaction); return its id."""
+        if not name.strip():
+            raise ValueError(f"room name must not be empty, got {name!r}")
+        with self.transaction():
+            return self._ensure_room(name)
+
+    @_translated
+    def rooms(self) -> list[RoomSummary]:
+        """All rooms by name, with their number of places."""
+        rows = self.db.execute(
+            "SELECT r.id, r.name, COUNT(p.id) FROM rooms r LEFT JOIN places p ON p.room_id = r.id "
+            "GROUP BY r.id ORDER BY r.name"
+        ).fetchall()
+        return [RoomSummary(id=row[0], name=row[1], n_places=row[2]) for row in rows]
+
+    def connect_rooms(self, room_a: str, room_b: str) -> bool:
+        """Add the undirected edge between two existing rooms; False if it was already there.
+
+        Raises :class:`UnknownRoomError` naming the first unknown room, or ``ValueError`` for a
+        self-loop.
+        """
+        if room_a == room_b:
+            raise ValueError(f"cannot connect room {room_a!r} to itself")
+        with self.transaction():
+            ids = []
+            for name in (room_a, room_b):
+                room_id = self._room_id(name)
+                if room_id is None:
+                    raise UnknownRoomError(name, self.path)
+                ids.append(room_id)
+            low, high = sorted(ids)
+            cursor = self.db.execute(
+                "INSERT OR IGNORE INTO edges (room_a_id, room_b_id, created_utc) VALUES (?, ?, ?)",
+                [low, high, utc_now_iso()],
+            )
+            return cursor.rowcount == 1
+
+    @_translated
+    def edges(self) -> list[tuple[str, str]]:
+        """All room-graph edges as pairs of room names, each pair sorted, sorted overall."""
+        rows = self.db.execute(
+            "SELECT a.name, b.name FROM edges e JOIN rooms a ON a.id = e.room_a_id "
+            "JOIN rooms b ON b.id = e.room_b_id"
+        ).fetchall()
+        pairs = [(a, b) if a <= b else (b, a) for a, b in rows]
+        return sorted(pairs)
+
+    @_translated
+    def place_id_for_image(self, image_sha256: str) -> int | None:
+        """The place holding the image with this SHA-256, if any."""
+        return self._place_id_for_image(image_sha256)
+
+    @_translated
+    def image_hashes(self) -> dict[str, int]:
+        """Every stored image SHA-256 with its place id."""
+        return dict(self.db.execute("SELECT image_sha256, id FROM places").fetchall())
+
+    def add_place(self, place: NewPlace, fingerprints: Sequence[Fingerprint]) -> int:
+        """Add a place with its fingerprints (one per detector) in one transaction; return its id.
+
+        All or nothing: on any error (duplicate image, full disk, lock) nothing is written.
+        Raises :class:`DuplicatePlaceError` if the image is already in the map, ``ValueError``
+        for no fingerprints, repeated detectors or differing image sizes.
+        """
+        if not fingerprints:
+            raise ValueError(f"place {place.source!r} has no fingerprints")
+        detectors = [f.detector for f in fingerprints]
+        if len(set(detectors)) != len(detectors):
+            raise ValueError(f"place {place.source!r} repeats a detector: {detectors}")
+        sizes = {(f.image_width_px, f.image_height_px) for f in fingerprints}
+        if len(sizes) != 1:
+            raise ValueError(f"fingerprints of {place.source!r} disagree on image size: {sizes}")
+        ((width_px, height_px),) = sizes
+        rows = [fingerprint_to_row(f) for f in fingerprints]
+        with self.transaction():
+            existing = self._place_id_for_image(place.image_sha256)
+            if existing is not None:
+                raise DuplicatePlaceError(place.image_sha256, existing, self.path)
+            place_row = {
+                "room_id": self._ensure_room(place.room),
+                "x_m": place.x_m,
+                "y_m": place.y_m,
+                "heading_deg": place.heading_deg,
+                "image_sha256": place.image_sha256,
+                "image_width_px": width_px,
+                "image_height_px": height_px,
+                "captured_utc": place.captured_utc,
+                "source": place.source,
+                "added_utc": utc_now_iso(),
+            }
+            place_id = int(self.db["places"].insert(place_row).last_pk)
+            self.db["fingerprints"].insert_all([{**row, "place_id": place_id} for row in rows])
+        return place_id
+
+    def _place_id_for_image(self, image_sha256: str) -> int | None:
+        row = self.db.execute(
+            "SELECT id FROM places WHERE image_sha256 = ?", [image_sha256]
+        ).fetchone()
+        return None if row is None else int(row[0])
+
+    @_translated
+    def places(self, room: str | None = None) -> list[Place]:
+        """All places (of ``room`` if given, which must exist), by id."""
+        sql = _SELECT_PLACES
+        params: list[Any] = []
+        if room is not None:
+            sql += " WHERE p.room_id = ?"
+            params.append(self.room_id(room))
+        rows = self.db.execute(sql + " ORDER BY p.id", params).fetchall()
+        return [Place(*row) for row in rows]
+
+    @_translated
+    def place(self, place_id: int) -> Place:
+        """The place with id ``place_id``; raises :class:`UnknownPlaceError` if there is none."""
+        row = self.db.execute(_SELECT_PLACES + " WHERE p.id = ?", [place_id]).fetchone()
+        if row is None:
+            raise UnknownPlaceError(f"unknown place {place_id} in {self.path}", self.path)
+        return Place(*row)
+
+    @_translated
+    def fingerprint_counts(self) -> dict[str, int]:
+        """Number of stored fingerprints per detector."""
+        rows = self.db.execute(
+            "SELECT detector, COUNT(*) FROM fingerprints GROUP BY detector ORDER BY detector"
+        ).fetchall()
+        return dict(rows)
+
+    @_translated
+    def file_size_bytes(self) -> int:
+        """Size on disk of the database file plus its write-ahead log."""
+        wal = self.path.with_name(self.path.name + "-wal")
+        return self.path.stat().st_size + (wal.stat().st_size if wal.exists() else 0)
+
+    def info(self) -> MapInfo:
+        """Rooms with their place counts, edges, fingerprints per detector and file size."""
+        return MapInfo(
+            path=self.path,
+            schema_version=self.schema_version(),
+            file_size_bytes=self.file_size_bytes(),
+            rooms=self.rooms(),
+            edges=self.edges(),
+            fingerprints_per_detector=self.fingerprint_counts(),
+        )
+
+
+__all__ = ["SCHEMA_VERSION", "DuplicatePlaceError", "MapDatabase", "utc_now_iso"]

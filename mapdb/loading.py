@@ -1,0 +1,137 @@
+"""Fast bulk reads of fingerprints: every fingerprint of a map in one query.
+
+Two shapes for the localizer's start-up:
+
+- :func:`load_fingerprints`: one :class:`StoredFingerprint` per (place, detector); keypoints and
+  bearings are zero-copy ``np.frombuffer`` views of the blobs, descriptors one cast each.
+- :func:`load_fingerprint_table`: one detector stacked into contiguous arrays (all descriptors
+  in one ``(N, d)`` matrix, with per-place offsets), built from one ``b"".join`` per column;
+  ready for a single nearest-neighbour index over the whole map.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass
+
+import numpy as np
+
+from localizer.fingerprint import Fingerprint
+from mapdb.codec import (
+    BEARINGS_DTYPE,
+    DESCRIPTOR_STORAGE,
+    DESCRIPTORS_DTYPE,
+    KEYPOINTS_DTYPE,
+    ParamsCache,
+    decode_descriptors,
+    fingerprint_from_row,
+)
+from mapdb.database import MapDatabase
+from mapdb.errors import translate_sqlite_error
+
+_SELECT = (
+    "SELECT f.place_id, r.name, f.detector, p.image_width_px, p.image_height_px, "
+    "f.n_keypoints, f.descriptor_dim, f.keypoints_xy, f.bearings_rad, f.descriptor_dtype, "
+    "f.descriptors, f.alv_x, f.alv_y, f.params_json "
+    "FROM fingerprints f JOIN places p ON p.id = f.place_id JOIN rooms r ON r.id = p.room_id"
+)
+
+
+@dataclass(frozen=True)
+class StoredFingerprint:
+    """A fingerprint with the place and room it belongs to and its stored ALV (robot frame)."""
+
+    place_id: int
+    room: str
+    alv_xy: tuple[float, float]
+    fingerprint: Fingerprint
+
+
+@dataclass(frozen=True)
+class FingerprintTable:
+    """All fingerprints of one detector, stacked; place ``i`` owns rows ``offsets[i]:offsets[i+1]``.
+
+    ``keypoints_xy`` (N, 2) float32 px, ``bearings_rad`` (N,) float64, ``descriptors`` (N, d)
+    float32, ``alv_xy`` (m, 2) float64, ``place_ids`` (m,) int64, ``rooms`` one name per place,
+    ``keypoint_place_index`` (N,) index into ``place_ids`` of each row.
+    """
+
+    detector: str
+    place_ids: np.ndarray
+    rooms: tuple[str, ...]
+    offsets: np.ndarray
+    keypoints_xy: np.ndarray
+    bearings_rad: np.ndarray
+    descriptors: np.ndarray
+    alv_xy: np.ndarray
+
+    @property
+    def keypoint_place_index(self) -> np.ndarray:
+        """For each stacked row, the index of its place in ``place_ids``."""
+        return np.repeat(np.arange(len(self.place_ids)), np.diff(self.offsets))
+
+
+def _query(map_db: MapDatabase, detector: str | None) -> list[tuple]:
+    sql = _SELECT + (" WHERE f.detector = ?" if detector is not None else "")
+    params = [detector] if detector is not None else []
+    try:
+        return map_db.db.execute(sql + " ORDER BY f.place_id, f.detector", params).fetchall()
+    except sqlite3.Error as error:
+        raise translate_sqlite_error(error, map_db.path) from error
+
+
+def _stack_descriptors(
+    codes: tuple[str, ...], blobs: tuple[bytes, ...], counts: tuple[int, ...], dim: int, total: int
+) -> np.ndarray:
+    """``(total, dim)`` float32 from per-row blobs: one join and one cast if all share a code."""
+    if len(set(codes)) <= 1:
+        storage = DESCRIPTOR_STORAGE[codes[0] if codes else "f4"]
+        stacked = np.frombuffer(b"".join(blobs), storage).reshape(total, dim)
+        return stacked if storage == DESCRIPTORS_DTYPE else stacked.astype(DESCRIPTORS_DTYPE)
+    parts = [decode_descriptors(b, c, n, dim) for c, b, n in zip(codes, blobs, counts, strict=True)]
+    return np.concatenate(parts).reshape(total, dim)
+
+
+def load_fingerprints(map_db: MapDatabase, detector: str | None = None) -> list[StoredFingerprint]:
+    """Every fingerprint (of ``detector`` if given), ordered by place id then detector."""
+    params_of = ParamsCache()
+    return [
+        StoredFingerprint(
+            place_id=row[0],
+            room=row[1],
+            alv_xy=(row[11], row[12]),
+            fingerprint=fingerprint_from_row(*row[2:11], params_of(row[13])),
+        )
+        for row in _query(map_db, detector)
+    ]
+
+
+def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTable:
+    """All fingerprints of ``detector`` stacked into contiguous arrays (see the class).
+
+    An empty table (no places) has ``descriptor_dim`` 0. Raises ``ValueError`` if stored
+    descriptors have differing dimensions.
+    """
+    rows = _query(map_db, detector)
+    if not rows:
+        columns: list[tuple] = [()] * 14
+    else:
+        columns = list(zip(*rows, strict=True))
+    dims = set(columns[6])
+    if len(dims) > 1:
+        raise ValueError(f"detector {detector!r} has descriptors of several sizes: {dims}")
+    dim = dims.pop() if dims else 0
+    counts = np.array(columns[5], dtype=np.int64)
+    offsets = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    total = int(offsets[-1])
+    return FingerprintTable(
+        detector=detector,
+        place_ids=np.array(columns[0], dtype=np.int64),
+        rooms=tuple(columns[1]),
+        offsets=offsets,
+        keypoints_xy=np.frombuffer(b"".join(columns[7]), KEYPOINTS_DTYPE).reshape(total, 2),
+        bearings_rad=np.frombuffer(b"".join(columns[8]), BEARINGS_DTYPE),
+        descriptors=_stack_descriptors(columns[9], columns[10], columns[5], dim, total),
+        alv_xy=np.array([columns[11], columns[12]], dtype=np.float64).T.reshape(len(rows), 2),
+    )

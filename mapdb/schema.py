@@ -1,0 +1,166 @@
+"""The schema of the map database and its numbered migrations.
+
+``MIGRATIONS[i]`` brings a database from schema version ``i`` to ``i + 1``; version 0 is an empty
+file. The version lives in ``meta(key='schema_version')``. Each migration runs in its own
+``BEGIN IMMEDIATE`` transaction together with the version bump, so an interrupted migration
+leaves the previous version intact. To change the schema, append a function; never edit one that
+has shipped.
+
+Tables (all STRICT; positions in metres and headings in degrees in the frame of the place's room):
+
+- ``meta(key TEXT PK, value TEXT)``
+- ``rooms(id, name UNIQUE, created_utc)``
+- ``edges(room_a_id, room_b_id, created_utc)``: undirected, stored once with
+  ``room_a_id < room_b_id``; both reference ``rooms``.
+- ``places(id, room_id -> rooms, x_m, y_m, heading_deg (NULL = unknown), image_sha256 UNIQUE,
+  image_width_px, image_height_px, captured_utc, source, added_utc)``
+- ``fingerprints(id, place_id -> places, detector, n_keypoints, descriptor_dim, keypoints_xy,
+  bearings_rad, descriptor_dtype, descriptors (blobs, see :mod:`mapdb.codec`), alv_x, alv_y,
+  params_json)``, UNIQUE ``(place_id, detector)``, indexed by ``(detector, place_id)`` so one
+  detector's rows come in place order without sorting the blobs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import sqlite_utils
+
+Migration = Callable[[sqlite_utils.Database], None]
+
+META_TABLE = "meta"
+VERSION_KEY = "schema_version"
+
+
+def _v1_initial(db: sqlite_utils.Database) -> None:
+    """Version 1: rooms, edges, places, fingerprints."""
+    db.create_table(
+        "rooms",
+        {"id": int, "name": str, "created_utc": str},
+        pk="id",
+        not_null={"name", "created_utc"},
+        strict=True,
+    )
+    db["rooms"].create_index(["name"], unique=True)
+    db.create_table(
+        "edges",
+        {"room_a_id": int, "room_b_id": int, "created_utc": str},
+        pk=("room_a_id", "room_b_id"),
+        foreign_keys=[("room_a_id", "rooms", "id"), ("room_b_id", "rooms", "id")],
+        not_null={"room_a_id", "room_b_id", "created_utc"},
+        strict=True,
+    )
+    db["edges"].create_index(["room_b_id"])
+    db.create_table(
+        "places",
+        {
+            "id": int,
+            "room_id": int,
+            "x_m": float,
+            "y_m": float,
+            "heading_deg": float,
+            "image_sha256": str,
+            "image_width_px": int,
+            "image_height_px": int,
+            "captured_utc": str,
+            "source": str,
+            "added_utc": str,
+        },
+        pk="id",
+        foreign_keys=[("room_id", "rooms", "id")],
+        not_null={
+            "room_id",
+            "image_sha256",
+            "image_width_px",
+            "image_height_px",
+            "source",
+            "added_utc",
+        },
+        strict=True,
+    )
+    db["places"].create_index(["image_sha256"], unique=True)
+    db["places"].create_index(["room_id"])
+    db.create_table(
+        "fingerprints",
+        {
+            "id": int,
+            "place_id": int,
+            "detector": str,
+            "n_keypoints": int,
+            "descriptor_dim": int,
+            "keypoints_xy": bytes,
+            "bearings_rad": bytes,
+            "descriptor_dtype": str,
+            "descriptors": bytes,
+            "alv_x": float,
+            "alv_y": float,
+            "params_json": str,
+        },
+        pk="id",
+        foreign_keys=[("place_id", "places", "id")],
+        not_null={
+            "place_id",
+            "detector",
+            "n_keypoints",
+            "descriptor_dim",
+            "keypoints_xy",
+            "bearings_rad",
+            "descriptor_dtype",
+            "descriptors",
+            "alv_x",
+            "alv_y",
+            "params_json",
+        },
+        strict=True,
+    )
+    db["fingerprints"].create_index(["place_id", "detector"], unique=True)
+    db["fingerprints"].create_index(["detector", "place_id"])
+
+
+MIGRATIONS: tuple[Migration, ...] = (_v1_initial,)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def read_schema_version(db: sqlite_utils.Database) -> int | None:
+    """The schema version of ``db``: 0 for an empty file, ``None`` if it is not a toploc map.
+
+    "Not a map" means other tables exist but no ``meta`` table, or ``meta`` lacks a valid
+    version. Reads only; raises ``sqlite3.DatabaseError`` if the file is not SQLite.
+    """
+    names = db.table_names()
+    if META_TABLE not in names:
+        return 0 if not names else None
+    rows = list(db.query(f"SELECT value FROM {META_TABLE} WHERE key = ?", [VERSION_KEY]))
+    if not rows:
+        return None
+    try:
+        return int(rows[0]["value"])
+    except ValueError:
+        return None
+
+
+def migrate(db: sqlite_utils.Database, migrations: Sequence[Migration] = MIGRATIONS) -> int:
+    """Apply the migrations ``db`` lacks, each in its own transaction; return the new version.
+
+    The caller has checked that the current version is not newer than ``len(migrations)``.
+    """
+    version = read_schema_version(db) or 0
+    for number in range(version + 1, len(migrations) + 1):
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            if number == 1:
+                db.create_table(
+                    META_TABLE, {"key": str, "value": str}, pk="key", strict=True, ignore=True
+                )
+            migrations[number - 1](db)
+            db.execute(
+                f"INSERT OR REPLACE INTO {META_TABLE} (key, value) VALUES (?, ?)",
+                [VERSION_KEY, str(number)],
+            )
+            db.execute("COMMIT")
+        except BaseException:
+            if db.conn.in_transaction:
+                db.execute("ROLLBACK")
+            raise
+        version = number
+    return version

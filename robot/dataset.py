@@ -1,0 +1,149 @@
+"""Render a panorama dataset of a preset world to a folder (the I/O adapter of the simulator).
+
+Layout of the folder::
+
+    manifest.csv      image,room,x_m,y_m,heading_deg  (one row per panorama)
+    images/<room>_<k>.png
+    render.json       how it was rendered (world, seed, condition, spacing, camera)
+
+``image`` is relative to the folder. ``x_m``, ``y_m`` and ``heading_deg`` are in the frame of the
+place's room: origin at the room's floor corner of smallest building x and y, axes parallel to
+the building axes (REP-103, heading counter-clockwise from the room's +x axis, in (-180, 180]).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from collections import Counter
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from robot.conditions import get_condition, world_under
+from robot.render import PanoramaCamera, render_panorama
+from robot.scene import build_scene
+from robot.world import Pose2D, capture_places
+from robot.worlds import make_world
+
+MANIFEST_NAME = "manifest.csv"
+MANIFEST_HEADER = ("image", "room", "x_m", "y_m", "heading_deg")
+
+
+@dataclass(frozen=True)
+class ManifestRow:
+    """One panorama of a dataset; position and heading in its room's frame (None if unknown)."""
+
+    image: str
+    room: str
+    x_m: float | None
+    y_m: float | None
+    heading_deg: float | None
+
+
+def _wrap_deg(angle_deg: float) -> float:
+    """Angle in degrees wrapped to (-180, 180]."""
+    wrapped = math.remainder(angle_deg, 360.0)
+    return 180.0 if wrapped == -180.0 else wrapped
+
+
+def _prepare_folder(out_dir: Path, overwrite: bool) -> None:
+    """Create ``out_dir``; refuse a non-empty one unless ``overwrite`` (then clear our files)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"output path {str(out_dir)!r} exists and is not a folder")
+    if out_dir.is_dir() and any(out_dir.iterdir()):
+        if not overwrite:
+            raise ValueError(
+                f"output folder {str(out_dir)!r} is not empty; "
+                "pass overwrite=True (--overwrite) to replace it"
+            )
+        shutil.rmtree(out_dir / "images", ignore_errors=True)
+        for name in (MANIFEST_NAME, "render.json"):
+            (out_dir / name).unlink(missing_ok=True)
+    (out_dir / "images").mkdir(parents=True, exist_ok=True)
+
+
+def render_dataset(
+    out_dir: str | Path,
+    world_name: str,
+    spacing_m: float | None = None,
+    condition: str = "default",
+    seed: int = 0,
+    heading_deg: float | None = 0.0,
+    camera: PanoramaCamera | None = None,
+    grey: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Render a panorama at every capture place of a preset world; return the manifest path.
+
+    ``spacing_m`` is the capture grid spacing (default: the world's); ``seed`` builds the world,
+    places the condition's objects and seeds the sensor noise; ``heading_deg`` is the heading of
+    every capture in room frames, or None for seeded uniform random headings. Raises
+    ``ValueError`` naming the bad value for an unknown world or condition, a non-positive
+    spacing, or a non-empty ``out_dir`` without ``overwrite``.
+    """
+    world = make_world(world_name, seed)
+    cond = get_condition(condition)
+    if spacing_m is not None and not spacing_m > 0:
+        raise ValueError(f"spacing_m must be positive, got {spacing_m}")
+    if heading_deg is not None and not math.isfinite(heading_deg):
+        raise ValueError(f"heading_deg must be finite or None, got {heading_deg}")
+    camera = camera or PanoramaCamera()
+    out = Path(out_dir)
+    places = capture_places(world, spacing_m)
+    _prepare_folder(out, overwrite)
+    scene = build_scene(world_under(world, cond, seed))
+    rng = np.random.default_rng([seed, 1])
+    per_room: Counter[str] = Counter()
+    rows = []
+    for i, place in enumerate(tqdm(places, desc=f"{world_name}/{condition}", disable=not progress)):
+        heading = float(rng.uniform(-180.0, 180.0)) if heading_deg is None else heading_deg
+        heading = _wrap_deg(heading)
+        pose = world.building_pose(place.room, Pose2D(place.x_m, place.y_m, math.radians(heading)))
+        image = render_panorama(scene, pose, camera, cond, seed=(seed, 2, i), grey=grey)
+        name = f"images/{place.room}_{per_room[place.room]:03d}.png"
+        per_room[place.room] += 1
+        bgr = image if grey else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        if not cv2.imwrite(str(out / name), bgr):
+            raise OSError(f"could not write {out / name}")
+        rows.append(ManifestRow(name, place.room, place.x_m, place.y_m, round(heading, 6)))
+    _write_render_info(out, world_name, seed, condition, spacing_m or world.place_spacing_m, camera)
+    return write_manifest(out / MANIFEST_NAME, rows)
+
+
+def _write_render_info(
+    out: Path, world: str, seed: int, condition: str, spacing_m: float, camera: PanoramaCamera
+) -> None:
+    info = {"world": world, "seed": seed, "condition": condition, "spacing_m": spacing_m}
+    info["camera"] = asdict(camera)
+    (out / "render.json").write_text(json.dumps(info, indent=2) + "\n")
+
+
+def write_manifest(path: Path, rows: list[ManifestRow]) -> Path:
+    """Write ``rows`` as a manifest CSV (empty cells for unknown values); return ``path``."""
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(MANIFEST_HEADER)
+        for r in rows:
+            values = (r.x_m, r.y_m, r.heading_deg)
+            writer.writerow([r.image, r.room, *("" if v is None else repr(v) for v in values)])
+    return path
+
+
+def read_manifest(path: str | Path) -> list[ManifestRow]:
+    """Read a manifest CSV; ``ValueError`` if its header is not ``MANIFEST_HEADER``."""
+    with Path(path).open(newline="") as f:
+        reader = csv.reader(f)
+        header = tuple(next(reader, ()))
+        if header != MANIFEST_HEADER:
+            raise ValueError(f"{path}: header must be {','.join(MANIFEST_HEADER)}, got {header}")
+        return [
+            ManifestRow(image, room, *(float(v) if v else None for v in (x, y, h)))
+            for image, room, x, y, h in reader
+        ]

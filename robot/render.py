@@ -1,0 +1,231 @@
+"""A vectorised ray caster for cylindrical panoramas of a :class:`~robot.scene.Scene`.
+
+Camera model. A panorama is ``width_px`` columns for 360°. Column 0 looks along the robot heading
+and columns increase clockwise, so the pixel centre at OpenCV x coordinate ``x`` has robot-frame
+azimuth ``-2*pi*x/W`` (REP-103: counter-clockwise positive). Row ``y`` (pixel centres at integers,
+0 at the top) has elevation ``atan((cy - y) / f)`` with ``cy = (H - 1) / 2``, where ``f`` is the
+cylinder focal length in pixels: ``W / (2*pi)`` (square pixels) unless a vertical field of view
+is given, in which case ``f = (H / 2) / tan(vfov / 2)``.
+
+Ray casting. A ray has horizontal unit direction, so its parameter ``t`` is the horizontal
+distance in metres. Walls and box sides (vertical quads) are intersected per column, and only the
+hits up to the nearest floor-to-ceiling quad can be visible; each pixel then takes the nearest of
+those whose height range it crosses. Floors, ceilings and box tops (horizontal quads) are
+intersected per pixel. Texture lookup is nearest-texel on a mip level chosen from the pixel
+footprint.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
+from robot.scene import Scene
+from robot.world import Pose2D
+
+
+def bearing_from_column(x_px: np.ndarray | float, width_px: int) -> np.ndarray:
+    """Robot-frame azimuth (rad, CCW, wrapped to (-pi, pi]) of panorama x coordinate ``x_px``."""
+    bearing = -2.0 * np.pi * np.asarray(x_px, dtype=float) / width_px
+    return np.pi - np.mod(np.pi - bearing, 2.0 * np.pi)
+
+
+def column_from_bearing(bearing_rad: np.ndarray | float, width_px: int) -> np.ndarray:
+    """Panorama x coordinate in [0, W) of robot-frame azimuth ``bearing_rad`` (CCW positive)."""
+    x = np.mod(-np.asarray(bearing_rad, dtype=float) * width_px / (2.0 * np.pi), width_px)
+    return np.where(x >= width_px, 0.0, x)  # mod can round up to W for tiny negative inputs
+
+
+@dataclass(frozen=True)
+class PanoramaCamera:
+    """A cylindrical panorama camera ``height_m`` above the floor.
+
+    ``vfov_deg`` is the vertical field of view from the top edge to the bottom edge of the image;
+    None gives square pixels (focal length ``W / (2*pi)``).
+    """
+
+    width_px: int = 1024
+    height_px: int = 192
+    vfov_deg: float | None = None
+    height_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.width_px < 8 or self.height_px < 1:
+            raise ValueError(
+                f"panorama size must be >= 8 x 1, got {self.width_px}x{self.height_px}"
+            )
+        if self.vfov_deg is not None and not 0 < self.vfov_deg < 180:
+            raise ValueError(f"vfov_deg must be in (0, 180), got {self.vfov_deg}")
+        if not self.height_m > 0:
+            raise ValueError(f"height_m must be positive, got {self.height_m}")
+
+    @property
+    def focal_px(self) -> float:
+        """Vertical focal length of the cylinder in pixels."""
+        if self.vfov_deg is None:
+            return self.width_px / (2.0 * math.pi)
+        return (self.height_px / 2.0) / math.tan(math.radians(self.vfov_deg) / 2.0)
+
+    def azimuths_rad(self) -> np.ndarray:
+        """(W,) robot-frame azimuth of each column (0, then decreasing: clockwise)."""
+        return -2.0 * np.pi * np.arange(self.width_px) / self.width_px
+
+    def tan_elevations(self) -> np.ndarray:
+        """(H,) tangent of the elevation of each row, positive above the horizon."""
+        centre = (self.height_px - 1) / 2.0
+        return (centre - np.arange(self.height_px)) / self.focal_px
+
+
+@dataclass(frozen=True)
+class RayHits:
+    """What each pixel's ray hits. Arrays are (H, W); ``quad_index`` is -1 where nothing is hit.
+
+    The ray of pixel (row, col) leaves ``origin_m`` along
+    ``(cos(azimuth_rad[col]), sin(azimuth_rad[col]), tan_elevation[row])`` (building frame), and
+    ``t_m`` is the ray parameter at the hit, i.e. the horizontal distance in metres.
+    """
+
+    quad_index: np.ndarray
+    t_m: np.ndarray  # inf where nothing is hit
+    origin_m: np.ndarray  # (3,) camera centre, building frame
+    azimuth_rad: np.ndarray  # (W,) building-frame azimuth of each column
+    tan_elevation: np.ndarray  # (H,)
+
+    def points_m(self) -> np.ndarray:
+        """(H, W, 3) building-frame hit points (nan where nothing is hit)."""
+        t = np.where(self.quad_index >= 0, self.t_m, np.nan)
+        h, w = t.shape
+        ray = np.empty((h, w, 3))
+        ray[..., 0] = np.cos(self.azimuth_rad)[None, :]
+        ray[..., 1] = np.sin(self.azimuth_rad)[None, :]
+        ray[..., 2] = self.tan_elevation[:, None]
+        return self.origin_m + t[..., None] * ray
+
+
+def _vertical_hits(
+    scene: Scene, origin: np.ndarray, dirs: np.ndarray, tan_el: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest wall/box-side hit per pixel: (H, W) quad index (-1: none) and t (inf: none)."""
+    quads = np.flatnonzero(scene.axis < 2)
+    axis = scene.axis[quads]
+    d_axis = dirs[:, axis]  # (W, K) direction component normal to each plane
+    d_along = dirs[:, 1 - axis]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (scene.coord_m[quads] - origin[axis]) / d_axis
+    along = origin[1 - axis] + t * d_along
+    ok = (d_axis * scene.normal_sign[quads] < 0) & (t > 1e-9)
+    ok &= (along >= scene.lo_m[quads, 0]) & (along <= scene.hi_m[quads, 0])
+    t = np.where(ok, t, np.inf)
+    cut = np.where(scene.full_height[quads], t, np.inf).min(axis=1, keepdims=True)
+    t[t > cut + 1e-9] = np.inf  # nothing behind a floor-to-ceiling quad is visible
+    depth = max(int(np.isfinite(t).sum(axis=1).max()), 1)
+    order = np.argsort(t, axis=1)[:, :depth]  # (W, M) candidate hits, nearest first
+    t_sorted = np.take_along_axis(t, order, axis=1)
+    q_sorted = quads[order]
+    with np.errstate(invalid="ignore"):
+        z = origin[2] + t_sorted[None] * tan_el[:, None, None]  # (H, W, M)
+    inside = (z >= scene.lo_m[q_sorted, 1]) & (z <= scene.hi_m[q_sorted, 1])
+    first = inside.argmax(axis=2)  # (H, W)
+    cols = np.arange(len(dirs))[None, :]
+    hit = np.take_along_axis(inside, first[..., None], axis=2)[..., 0]
+    return np.where(hit, q_sorted[cols, first], -1), np.where(hit, t_sorted[cols, first], np.inf)
+
+
+def _horizontal_hits(
+    scene: Scene,
+    origin: np.ndarray,
+    dirs: np.ndarray,
+    tan_el: np.ndarray,
+    best_q: np.ndarray,
+    best_t: np.ndarray,
+) -> None:
+    """Update ``best_q``/``best_t`` in place with nearer floor, ceiling and box-top hits."""
+    quads = np.flatnonzero(scene.axis == 2)
+    levels = {(float(scene.coord_m[q]), int(scene.normal_sign[q])) for q in quads}
+    for z, normal in sorted(levels):
+        if (z - origin[2]) * normal >= 0:
+            continue  # the camera is behind this level's face
+        rows = np.flatnonzero(tan_el * normal < 0)
+        if len(rows) == 0:
+            continue
+        t_row = ((z - origin[2]) / tan_el[rows])[:, None]  # (R, 1)
+        x = origin[0] + t_row * dirs[None, :, 0]  # (R, W)
+        y = origin[1] + t_row * dirs[None, :, 1]
+        q_sub, t_sub = best_q[rows], best_t[rows]
+        same = quads[(scene.coord_m[quads] == z) & (scene.normal_sign[quads] == normal)]
+        for q in same:
+            (x0, y0), (x1, y1) = scene.lo_m[q], scene.hi_m[q]
+            inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1) & (t_row < t_sub)
+            q_sub[inside] = q
+            t_sub = np.where(inside, t_row, t_sub)
+        best_q[rows], best_t[rows] = q_sub, t_sub
+
+
+def cast_rays(scene: Scene, pose: Pose2D, camera: PanoramaCamera) -> RayHits:
+    """Cast the panorama's rays from ``pose`` (building frame) and return the nearest hits."""
+    azimuth = pose.heading_rad + camera.azimuths_rad()
+    dirs = np.stack([np.cos(azimuth), np.sin(azimuth)], axis=1)  # (W, 2) building frame
+    origin = np.array([pose.x_m, pose.y_m, camera.height_m])
+    tan_el = camera.tan_elevations()
+    best_q, best_t = _vertical_hits(scene, origin, dirs, tan_el)
+    _horizontal_hits(scene, origin, dirs, tan_el, best_q, best_t)
+    return RayHits(best_q, best_t, origin, azimuth, tan_el)
+
+
+def shade_hits(scene: Scene, hits: RayHits, camera: PanoramaCamera) -> np.ndarray:
+    """(H, W, 3) float32 RGB radiance in grey levels (0..255) of the hit surfaces; 0 for misses.
+
+    Textures are sampled nearest-texel from the mip level whose texel best matches the pixel
+    footprint (grazing angles are limited to 0.2 of a head-on view), times the quad's shade.
+    """
+    q = hits.quad_index
+    rows, cols = np.nonzero(q >= 0)
+    qv = q[rows, cols]
+    t = hits.t_m[rows, cols]
+    tan_el = hits.tan_elevation[rows]
+    ray = np.stack([np.cos(hits.azimuth_rad[cols]), np.sin(hits.azimuth_rad[cols]), tan_el], axis=1)
+    rel = hits.origin_m + t[:, None] * ray - scene.uv_origin_m[qv]
+    atlas = scene.atlas
+    u_texel = np.einsum("ij,ij->i", rel, scene.u_axis[qv]) / scene.tile_m[qv, 0] * atlas.size_px
+    v_texel = np.einsum("ij,ij->i", rel, scene.v_axis[qv]) / scene.tile_m[qv, 1] * atlas.size_px
+    secant = np.sqrt(1.0 + tan_el**2)  # ray length per metre of horizontal distance
+    cos_incidence = np.abs(ray[np.arange(len(qv)), scene.axis[qv]]) / secant
+    pixel_rad = max(2.0 * math.pi / camera.width_px, 1.0 / camera.focal_px)
+    footprint_m = t * secant * pixel_rad / np.maximum(cos_incidence, 0.2)
+    texel_m = scene.tile_m[qv].min(axis=1) / atlas.size_px
+    level = np.floor(np.log2(np.maximum(footprint_m / texel_m, 1.0)) + 0.5).astype(np.int64)
+    level = np.minimum(level, atlas.levels - 1)
+    side = atlas.size_px >> level
+    col = np.mod(np.floor(u_texel / (1 << level)).astype(np.int64), side)
+    row = side - 1 - np.mod(np.floor(v_texel / (1 << level)).astype(np.int64), side)
+    index = atlas.level_offset[scene.texture_index[qv], level] + row * side + col
+    out = np.zeros((*q.shape, 3), np.float32)
+    out[rows, cols] = atlas.texels[index].astype(np.float32) * scene.shade[qv][:, None]
+    return out
+
+
+def render_panorama(
+    scene: Scene,
+    pose: Pose2D,
+    camera: PanoramaCamera | None = None,
+    condition: Condition = DEFAULT_CONDITION,
+    seed: int | Sequence[int] = 0,
+    grey: bool = False,
+) -> np.ndarray:
+    """Render the panorama seen from ``pose`` (building frame) as uint8 RGB (H, W, 3) or grey.
+
+    ``condition`` sets gain, gamma and sensor noise (seeded by ``seed``, an int or ints); the
+    objects it adds must already be in ``scene`` (see :func:`robot.conditions.world_under`).
+    Raises ``ValueError`` if the pose is outside every room.
+    """
+    camera = camera or PanoramaCamera()
+    if scene.room_of(pose.x_m, pose.y_m) < 0:
+        raise ValueError(f"pose ({pose.x_m}, {pose.y_m}) m is outside every room of the scene")
+    radiance = shade_hits(scene, cast_rays(scene, pose, camera), camera)
+    image = apply_photometric(radiance, condition, np.random.default_rng(seed))
+    return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if grey else image

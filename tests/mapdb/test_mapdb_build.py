@@ -1,0 +1,136 @@
+"""The build pipeline with a fake extractor: parallel, idempotent, partial failures, interrupts."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import pytest
+from mapdb_fake_extractor import crashing_extract, fake_extract
+from mapdb_helpers import assert_consistent, table_counts
+
+from mapdb.build import Status, build_map
+from mapdb.database import MapDatabase
+from mapdb.dataset import read_manifest
+from mapdb.errors import BuildAbortedError, DiskFullError
+from mapdb.loading import load_fingerprints
+
+EXTRACT = functools.partial(fake_extract, presets=("sift", "mser"))
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_build_imports_every_image_with_its_pose(
+    make_dataset, map_db: MapDatabase, db_path: Path, workers: int
+) -> None:
+    entries = read_manifest(make_dataset(7))
+    report = build_map(map_db, entries, EXTRACT, workers=workers, progress=False)
+    assert report.ok and report.count(Status.ADDED) == 7
+    assert table_counts(db_path) == {"rooms": 3, "edges": 0, "places": 7, "fingerprints": 14}
+    by_source = {Path(p.source).name: p for p in map_db.places()}
+    assert by_source["pano_004.png"].room == "hall"
+    assert (by_source["pano_004.png"].x_m, by_source["pano_004.png"].heading_deg) == (2.0, 40.0)
+    assert by_source["pano_003.png"].x_m is None
+    assert (
+        by_source["pano_000.png"].image_width_px,
+        by_source["pano_000.png"].image_height_px,
+    ) == (
+        96,
+        24,
+    )
+    assert by_source["pano_000.png"].captured_utc is not None
+    assert_consistent(db_path)
+
+
+def test_rerun_skips_every_image_and_says_so(make_dataset, map_db: MapDatabase) -> None:
+    entries = read_manifest(make_dataset(5))
+    build_map(map_db, entries, EXTRACT, workers=0, progress=False)
+    seen = []
+    again = build_map(map_db, entries, EXTRACT, workers=2, progress=False, on_outcome=seen.append)
+    assert again.ok and again.count(Status.SKIPPED) == 5
+    assert seen == again.outcomes
+    assert "already in the map as place" in seen[0].describe()
+    assert len(map_db.places()) == 5
+
+
+def test_repeated_image_in_one_dataset_is_skipped(make_dataset, map_db: MapDatabase) -> None:
+    folder = make_dataset(2)
+    manifest = folder / "manifest.csv"
+    manifest.write_text(manifest.read_text() + "img/pano_001.png,office,,,\n")
+    report = build_map(map_db, read_manifest(folder), EXTRACT, workers=0, progress=False)
+    assert (report.count(Status.ADDED), report.count(Status.SKIPPED)) == (2, 1)
+    (skipped,) = [o for o in report.outcomes if o.status is Status.SKIPPED]
+    assert "same image as img/pano_001.png" in skipped.message
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_corrupt_and_missing_images_fail_alone(
+    make_dataset, map_db: MapDatabase, db_path: Path, workers: int
+) -> None:
+    folder = make_dataset(6, corrupt=(2,))
+    (folder / "img" / "pano_004.png").unlink()
+    report = build_map(map_db, read_manifest(folder), EXTRACT, workers=workers, progress=False)
+    failed = {o.image: o.message for o in report.outcomes if o.status is Status.FAILED}
+    assert set(failed) == {"img/pano_002.png", "img/pano_004.png"}
+    assert "pano_002.png: corrupt" in failed["img/pano_002.png"]
+    assert "cannot read" in failed["img/pano_004.png"]
+    assert not report.ok and report.count(Status.ADDED) == 4
+    assert "failed 2" in report.summary()
+    assert_consistent(db_path)
+
+
+def test_ctrl_c_mid_build_keeps_committed_places_and_rerun_completes(
+    make_dataset, map_db: MapDatabase, db_path: Path
+) -> None:
+    entries = read_manifest(make_dataset(6))
+    calls = []
+
+    def interrupting(path: Path) -> list:
+        calls.append(path)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return EXTRACT(path)
+
+    report = build_map(map_db, entries, interrupting, workers=0, progress=False)
+    assert report.interrupted and not report.ok
+    assert report.count(Status.ADDED) == 2
+    assert table_counts(db_path)["places"] == 2
+    assert_consistent(db_path)
+    rerun = build_map(map_db, entries, EXTRACT, workers=0, progress=False)
+    assert (rerun.count(Status.SKIPPED), rerun.count(Status.ADDED)) == (2, 4)
+    assert table_counts(db_path)["fingerprints"] == 12
+    assert_consistent(db_path)
+
+
+def test_full_disk_stops_the_build_and_keeps_earlier_places(
+    make_dataset, map_db: MapDatabase, db_path: Path
+) -> None:
+    entries = read_manifest(make_dataset(6))
+    build_map(map_db, entries[:2], EXTRACT, workers=0, progress=False)
+    stored = {s.place_id: s.fingerprint.descriptors.copy() for s in load_fingerprints(map_db)}
+    page_count = map_db.db.execute("PRAGMA page_count").fetchone()[0]
+    map_db.db.execute(f"PRAGMA max_page_count = {page_count + 2}")
+    with pytest.raises(DiskFullError, match=r"map\.db"):
+        build_map(map_db, entries, EXTRACT, workers=2, progress=False)
+    map_db.close()
+    assert_consistent(db_path)
+    with MapDatabase.open(db_path) as reopened:
+        after = {s.place_id: s.fingerprint.descriptors for s in load_fingerprints(reopened)}
+        assert set(stored) <= set(after)
+        for key, descriptors in stored.items():
+            assert (after[key] == descriptors).all()
+        rerun = build_map(reopened, entries, EXTRACT, workers=0, progress=False)
+    assert rerun.ok
+    assert table_counts(db_path)["places"] == 6
+
+
+def test_dead_worker_aborts_cleanly_and_rerun_completes(
+    make_dataset, map_db: MapDatabase, db_path: Path
+) -> None:
+    entries = read_manifest(make_dataset(8))
+    crashing = functools.partial(crashing_extract, presets=("sift", "mser"))
+    with pytest.raises(BuildAbortedError, match=r"worker process died.*re-run the build"):
+        build_map(map_db, entries, crashing, workers=2, progress=False)
+    assert_consistent(db_path)
+    rerun = build_map(map_db, entries, EXTRACT, workers=2, progress=False)
+    assert rerun.ok
+    assert table_counts(db_path)["places"] == 8

@@ -1,0 +1,71 @@
+"""Reading manifest.csv: columns, optional pose, and errors naming file, line and column."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from mapdb.dataset import read_manifest, sha256_file
+from mapdb.errors import ManifestError
+
+
+def write_manifest(folder: Path, text: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "manifest.csv").write_text(text, encoding="utf-8")
+    return folder
+
+
+def test_manifest_rows_with_and_without_pose(tmp_path: Path) -> None:
+    folder = write_manifest(
+        tmp_path / "ds",
+        "\ufeffimage,room,x_m,y_m,heading_deg,extra\n"
+        "a.png,kitchen,1.5,-2,90,x\n"
+        "sub/b.png, hall ,,,\n"
+        "\n"
+        "c.png,hall,0,0,\n",
+    )
+    a, b, c = read_manifest(folder)
+    assert (a.image, a.room, a.x_m, a.y_m, a.heading_deg) == ("a.png", "kitchen", 1.5, -2.0, 90.0)
+    assert a.path == folder / "a.png"
+    assert (b.room, b.x_m, b.y_m, b.heading_deg) == ("hall", None, None, None)
+    assert b.path == folder / "sub" / "b.png"
+    assert (c.x_m, c.heading_deg) == (0.0, None)
+
+
+def test_missing_column_is_named(tmp_path: Path) -> None:
+    folder = write_manifest(tmp_path / "ds", "image,room,x_m,heading_deg\na.png,hall,1,0\n")
+    with pytest.raises(ManifestError, match=r"manifest\.csv lacks column\(s\) 'y_m'"):
+        read_manifest(folder)
+
+
+@pytest.mark.parametrize(
+    ("row", "message"),
+    [
+        ("a.png,hall,one,2,3", r"line 2: column 'x_m' must be a number or empty, got 'one'"),
+        ("a.png,hall,1,2,nan", r"line 2: column 'heading_deg' must be finite"),
+        ("a.png,,1,2,3", r"line 2: column 'room' is empty"),
+        (",hall,1,2,3", r"line 2: column 'image' is empty"),
+        ("a.png,hall,1,,3", r"line 2: give both 'x_m' and 'y_m'"),
+    ],
+)
+def test_bad_values_name_line_and_column(tmp_path: Path, row: str, message: str) -> None:
+    folder = write_manifest(tmp_path / "ds", f"image,room,x_m,y_m,heading_deg\n{row}\n")
+    with pytest.raises(ManifestError, match=message):
+        read_manifest(folder)
+
+
+def test_missing_manifest_and_folder_are_named(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ManifestError, match=r"empty/manifest\.csv not found"):
+        read_manifest(tmp_path / "empty")
+    with pytest.raises(ManifestError, match=r"dataset folder .*nowhere does not exist"):
+        read_manifest(tmp_path / "nowhere")
+
+
+def test_sha256_file_matches_hashlib(tmp_path: Path) -> None:
+    path = tmp_path / "blob.bin"
+    data = bytes(range(256)) * 5000
+    path.write_bytes(data)
+    assert sha256_file(path, chunk_bytes=1000) == hashlib.sha256(data).hexdigest()

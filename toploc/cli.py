@@ -1,0 +1,21 @@
+"""The ``toploc`` command line: a click group that registers one module per subcommand."""
+
+from __future__ import annotations
+
+import click
+
+from toploc import __version__
+from toploc.commands.dataset import dataset
+from toploc.commands.map import map_group
+from toploc.commands.simulate import simulate
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="toploc")
+def main() -> None:
+    """toploc: which room is the robot in, and where should it drive to find out."""
+
+
+main.add_command(simulate)
+main.add_command(dataset)
+main.add_command(map_group)

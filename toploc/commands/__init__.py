@@ -1,0 +1,1 @@
+"""One module per ``toploc`` subcommand (or subcommand group); ``toploc.cli`` registers them."""

@@ -1,0 +1,255 @@
+"""``toploc map``: build, extend, connect, inspect and export the map database.
+
+Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` and exit status
+1. ``map build`` exits 1 if any image failed (the others are imported) and 130 if interrupted
+(the map stays consistent; re-running completes it). Also runnable as
+``python -m toploc.commands.map``.
+
+Feature extraction is :func:`extract_panorama` (``localizer.panorama_io`` + ``localizer.features``)
+unless the environment variable ``TOPLOC_MAP_EXTRACTOR`` names another one as
+``module:function`` with the same signature (used by tests and benchmarks).
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import json
+import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from localizer.fingerprint import Fingerprint
+from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
+from mapdb.database import MapDatabase
+from mapdb.dataset import ManifestEntry, read_manifest
+from mapdb.errors import MapDatabaseError
+from mapdb.graph import export_graphml
+from mapdb.records import MapInfo
+
+EXTRACTOR_ENV = "TOPLOC_MAP_EXTRACTOR"
+DEFAULT_DETECTORS = "sift,mser"
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+def extract_panorama(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
+    """Read the cylindrical panorama at ``path`` and extract one fingerprint per preset.
+
+    Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file.
+    """
+    import cv2
+
+    from localizer.features import extract_preset
+    from localizer.panorama_io import read_panorama
+
+    cv2.setNumThreads(1)  # one process per core already
+    image = read_panorama(path)
+    return [extract_preset(image, preset) for preset in presets]
+
+
+def parse_detectors(text: str) -> tuple[str, ...]:
+    """``"sift,mser"`` -> ``("sift", "mser")``; each an extraction preset, each detector once."""
+    from localizer.features import PRESETS, params_from_preset
+
+    presets = tuple(name.strip() for name in text.split(",") if name.strip())
+    if not presets:
+        raise click.BadParameter("give at least one detector, e.g. sift,mser")
+    unknown = [name for name in presets if name not in PRESETS]
+    if unknown:
+        raise click.BadParameter(f"unknown detector {unknown[0]!r}; known: {sorted(PRESETS)}")
+    detectors = [params_from_preset(name).detector for name in presets]
+    if len(set(detectors)) != len(detectors):
+        raise click.BadParameter(f"each detector may appear once, got {', '.join(presets)}")
+    return presets
+
+
+def resolve_extractor(presets: tuple[str, ...]) -> Extractor:
+    """The picklable ``extract(path)`` for ``presets`` (honours ``TOPLOC_MAP_EXTRACTOR``)."""
+    spec = os.environ.get(EXTRACTOR_ENV)
+    function: Callable[..., list[Fingerprint]] = extract_panorama
+    if spec:
+        module_name, _, attribute = spec.partition(":")
+        function = getattr(importlib.import_module(module_name), attribute)
+    return functools.partial(function, presets=presets)
+
+
+@contextmanager
+def _map_errors() -> Iterator[None]:
+    """Turn a MapDatabaseError into click's ``Error: <message>`` with exit status 1."""
+    try:
+        yield
+    except MapDatabaseError as error:
+        raise click.ClickException(str(error)) from error
+
+
+def _log_outcome(outcome: Outcome, verbose: bool) -> None:
+    """Failures always, one line each, under the progress bar; the rest with ``--verbose``."""
+    if outcome.status is Status.FAILED or verbose:
+        tqdm.write(outcome.describe(), file=click.get_text_stream("stderr"))
+
+
+def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
+    """Print the summary; exit 130 if interrupted, 1 if any image failed."""
+    click.echo(f"{db_path}: {report.summary()}")
+    skipped = report.count(Status.SKIPPED)
+    if skipped and not verbose:
+        click.echo(f"skipped {skipped} image(s) already in the map (-v lists them)")
+    if report.interrupted:
+        click.echo("interrupted: the map is consistent; run the same command again to finish")
+        raise SystemExit(EXIT_INTERRUPTED)
+    failed = [o.image for o in report.outcomes if o.status is Status.FAILED]
+    if failed:
+        raise click.ClickException(f"{len(failed)} image(s) failed: {', '.join(failed)}")
+
+
+db_option = click.option(
+    "--db",
+    "db_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The map database file (SQLite).",
+)
+detector_option = click.option(
+    "--detector",
+    "detectors",
+    default=DEFAULT_DETECTORS,
+    show_default=True,
+    help="Comma-separated extraction presets (sift, mser, sift-lower, mser-band20, ...).",
+)
+
+
+@click.group("map")
+def map_group() -> None:
+    """Build and inspect the map database: rooms, their graph, places and fingerprints."""
+
+
+@map_group.command("build")
+@click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
+@db_option
+@detector_option
+@click.option(
+    "--workers",
+    type=click.IntRange(min=0),
+    default=os.cpu_count() or 1,
+    show_default=True,
+    help="Extraction processes (0 or 1: in this process).",
+)
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
+@click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
+def build_command(
+    dataset: Path, db_path: Path, detectors: str, workers: int, progress: bool, verbose: bool
+) -> None:
+    """Import the panoramas of DATASET (a folder with manifest.csv) into the map.
+
+    Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
+    """
+    presets = parse_detectors(detectors)
+    with _map_errors():
+        entries = read_manifest(dataset)
+        with MapDatabase.open(db_path) as map_db:
+            report = build_map(
+                map_db,
+                entries,
+                resolve_extractor(presets),
+                workers=workers,
+                progress=progress,
+                on_outcome=lambda outcome: _log_outcome(outcome, verbose),
+            )
+    _finish(report, db_path, verbose)
+
+
+@map_group.command("add")
+@click.argument("image", type=click.Path(dir_okay=False, path_type=Path))
+@db_option
+@click.option("--room", required=True, help="The room the panorama was taken in.")
+@click.option("--x-m", type=float, default=None, help="x in the room's frame, metres.")
+@click.option("--y-m", type=float, default=None, help="y in the room's frame, metres.")
+@click.option("--heading-deg", type=float, default=None, help="Heading in the room, degrees CCW.")
+@detector_option
+def add_command(
+    image: Path,
+    db_path: Path,
+    room: str,
+    x_m: float | None,
+    y_m: float | None,
+    heading_deg: float | None,
+    detectors: str,
+) -> None:
+    """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
+    if (x_m is None) != (y_m is None):
+        raise click.UsageError("give both --x-m and --y-m, or neither")
+    if not room.strip():
+        raise click.BadParameter("must not be empty", param_hint="--room")
+    presets = parse_detectors(detectors)
+    entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
+    with _map_errors(), MapDatabase.open(db_path) as map_db:
+        report = build_map(map_db, [entry], resolve_extractor(presets), workers=0, progress=False)
+    (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
+    if outcome.status is Status.FAILED:
+        raise click.ClickException(f"{image}: {outcome.message}")
+    click.echo(outcome.describe())
+
+
+@map_group.command("connect")
+@click.argument("room_a")
+@click.argument("room_b")
+@db_option
+def connect_command(room_a: str, room_b: str, db_path: Path) -> None:
+    """Record that the robot can drive between ROOM_A and ROOM_B (an undirected edge)."""
+    if room_a == room_b:
+        raise click.BadParameter(f"cannot connect room {room_a!r} to itself")
+    with _map_errors(), MapDatabase.open(db_path, create=False) as map_db:
+        added = map_db.connect_rooms(room_a, room_b)
+    state = "connected" if added else "already connected:"
+    click.echo(f"{state} {room_a} <-> {room_b}")
+
+
+def _format_info(info: MapInfo) -> str:
+    lines = [
+        f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
+        f"{len(info.rooms)} rooms, {info.n_places} places",
+        "rooms:",
+        *(f"  {room.name}: {room.n_places} places" for room in info.rooms),
+        "fingerprints: "
+        + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
+        f"edges ({len(info.edges)}):",
+        *(f"  {a} <-> {b}" for a, b in info.edges),
+    ]
+    return "\n".join(lines)
+
+
+@map_group.command("info")
+@db_option
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+def info_command(db_path: Path, as_json: bool) -> None:
+    """Rooms, places per room, fingerprints per detector, edges and file size."""
+    with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
+        info = map_db.info()
+    click.echo(json.dumps(info.to_json(), indent=2) if as_json else _format_info(info))
+
+
+@map_group.command("export")
+@db_option
+@click.option(
+    "--graphml",
+    "graphml_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Output GraphML file.",
+)
+def export_command(db_path: Path, graphml_path: Path) -> None:
+    """Export the room graph (rooms as nodes, with their place counts) as GraphML."""
+    with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
+        graph = export_graphml(map_db, graphml_path)
+    click.echo(
+        f"wrote {graphml_path}: {graph.number_of_nodes()} rooms, {graph.number_of_edges()} edges"
+    )
+
+
+if __name__ == "__main__":
+    map_group()
