@@ -7,12 +7,16 @@ clockwise; see :mod:`localizer.panorama`) and returns a :class:`~localizer.finge
 - ``"mser"``: maximally stable extremal regions (``cv2.MSER_create``); each region becomes a
   keypoint at its centroid whose size is the major axis of the region's second-moment ellipse
   (``4*sqrt(largest eigenvalue)``, the diameter for a disc), described by SIFT descriptors via
-  ``sift.compute``. MSER keypoints are upright (angle 0): the robot's camera does not roll.
+  ``sift.compute`` at the SIFT pyramid level matching their size. MSER keypoints are upright
+  (angle 0): the robot's camera does not roll.
 
 360° wrap-around: the image is padded circularly by ``wrap_margin_px`` columns on both sides
 before detection, so features straddling column 0 are detected and described as in the middle of
 the image. Keypoints are kept only where ``-0.5 <= x < W - 0.5`` (each physical point exactly
 once); copies the detector places a hair differently near the seam are dropped as duplicates.
+MSER regions cut by the end of the padding are dropped (their centroid would be wrong). Features
+larger than the margin that straddle the seam may still differ from those of a rolled panorama,
+because MSER stability and SIFT's coarse octaves see the truncated neighbourhood.
 
 Filters (thesis §5.8-5.9): a horizon band of ± ``band_deg`` degrees, and the ``"lower"`` or
 ``"upper"`` half of the rows. Filters act on keypoint positions after detection, so detection near
@@ -60,10 +64,10 @@ class ExtractionParams:
     detector: str = "sift"
     band_deg: float | None = None
     rows: str = "all"
-    max_keypoints: int | None = 2000
+    max_keypoints: int | None = None
     focal_px: float | None = None
     horizon_row_px: float | None = None
-    wrap_margin_px: int = 64
+    wrap_margin_px: int = 128
     sift_n_octave_layers: int = 3
     sift_contrast_threshold: float = 0.04
     sift_edge_threshold: float = 10.0
@@ -160,15 +164,33 @@ def _mser_keypoints(padded: np.ndarray, params: ExtractionParams) -> list[cv2.Ke
         max_area=params.mser_max_area,
         max_variation=params.mser_max_variation,
     )
-    regions, _ = mser.detectRegions(padded)
+    regions, boxes = mser.detectRegions(padded)
     keypoints = []
-    for region in regions:
+    for region, (x0, _, box_w, _) in zip(regions, boxes, strict=True):
+        if params.wrap_margin_px > 0 and (x0 == 0 or x0 + box_w >= padded.shape[1]):
+            continue  # cut off by the end of the circular padding: centroid would be wrong
         pts = region.astype(np.float64)  # (n, 2) as (x, y)
         centre = pts.mean(axis=0)
         cov = np.cov(pts, rowvar=False) if len(pts) > 1 else np.zeros((2, 2))
         size = max(4.0 * float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0))), 2.0)
-        keypoints.append(cv2.KeyPoint(float(centre[0]), float(centre[1]), size, 0.0, size))
+        octave = _pack_octave(size, padded.shape, params)
+        keypoints.append(cv2.KeyPoint(float(centre[0]), float(centre[1]), size, 0.0, size, octave))
     return keypoints
+
+
+def _pack_octave(size_px: float, shape: tuple[int, ...], params: ExtractionParams) -> int:
+    """OpenCV's packed ``octave | layer << 8`` of the SIFT pyramid level matching ``size_px``.
+
+    A SIFT keypoint of diameter ``size`` lives where ``2*sigma*2**(octave + layer/n) == size``;
+    describing MSER keypoints at that level (not on the full-resolution image) makes
+    ``sift.compute`` ~10x faster and samples large regions from a smoothed image, as for DoG.
+    """
+    n = params.sift_n_octave_layers
+    v = max(np.log2(size_px / (2.0 * params.sift_sigma)) * n, 0.0)
+    max_octave = max(int(np.log2(min(shape[:2]))) - 3, 0)
+    octave = min(int(v // n), max_octave)
+    layer = int(np.clip(round(v - octave * n), 1, n))
+    return octave | (layer << 8)
 
 
 def _detect(padded: np.ndarray, params: ExtractionParams) -> tuple[list[cv2.KeyPoint], Any]:
@@ -256,4 +278,3 @@ def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fin
 def extract_preset(image: np.ndarray, preset: str = "sift", **overrides: Any) -> Fingerprint:
     """``extract`` with the named preset merged over the defaults (and ``overrides`` over that)."""
     return extract(image, params_from_preset(preset, **overrides))
-

@@ -18,6 +18,7 @@ lock, read-only) and a dead worker process stop the build with a
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -148,7 +149,9 @@ def _extract_parallel(
 ) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
     """Results as they complete, with at most ``2 * workers`` jobs submitted at a time."""
     pending = iter(jobs)
-    pool = ProcessPoolExecutor(max_workers=workers)
+    # Spawn, not fork: a forked child of a process whose OpenCV thread pool is running can
+    # deadlock on a lock held by a thread that does not exist in the child.
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     in_flight: dict[Future[list[Fingerprint]], _Job] = {}
     finished = False
 
