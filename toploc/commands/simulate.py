@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -47,7 +48,9 @@ def run_simulation(
     bar = tqdm(total=len(tasks), desc="simulating", unit="setting", disable=not progress)
     rows: list[dict[str, Any]] = []
     if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
+        # Spawn, as mapdb's build does: the CLI process has imported OpenCV, and a fork after
+        # its threads start can deadlock the child.
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             for row in pool.map(run_row, tasks, chunksize=4):
                 rows.append(row)
                 bar.update()
