@@ -6,7 +6,9 @@ import click
 
 from toploc import __version__
 from toploc.commands.dataset import dataset
+from toploc.commands.eval import eval_group
 from toploc.commands.map import map_group
+from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
 
 
@@ -19,3 +21,5 @@ def main() -> None:
 main.add_command(simulate)
 main.add_command(dataset)
 main.add_command(map_group)
+main.add_command(eval_group)
+main.add_command(sim_group)
