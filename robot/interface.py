@@ -1,0 +1,59 @@
+"""What toploc needs from a robot: capture a panorama, turn and drive, report odometry.
+
+The simulated robot (``robot.sim_robot``) and a real base (Pioneer over pyserial, with a
+camera) both provide :class:`Robot`; the active localizer and the Zenoh robot node use only
+this protocol.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Capture:
+    """A cylindrical panorama (``image``: uint8, H x W grey or H x W x 3 BGR) and when it was
+    taken (``stamp_s``, seconds, the robot's clock). Column 0 looks along the robot's heading."""
+
+    image: np.ndarray
+    stamp_s: float
+    source: str
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """Dead-reckoned pose in the odometry frame (metres, radians, REP-103), drifting over time."""
+
+    x_m: float
+    y_m: float
+    heading_rad: float
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """What a move did: the turn and the distance actually made; ``bumped`` if it was stopped
+    by contact before the commanded distance."""
+
+    turned_rad: float
+    moved_m: float
+    bumped: bool
+
+
+class Robot(Protocol):
+    """A mobile robot with a panoramic camera."""
+
+    def capture(self) -> Capture:
+        """Take a panorama now."""
+        ...
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        """Turn in place by ``turn_rad`` (counter-clockwise positive), then drive ``forward_m``
+        straight ahead (negative: backwards)."""
+        ...
+
+    def odometry(self) -> Odometry:
+        """The current dead-reckoned pose."""
+        ...
