@@ -17,6 +17,8 @@ from mapdb.errors import ManifestError
 
 MANIFEST_NAME = "manifest.csv"
 MANIFEST_COLUMNS = ("image", "room", "x_m", "y_m", "heading_deg")
+EDGES_NAME = "edges.csv"
+EDGES_COLUMNS = ("room_a", "room_b")
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,37 @@ def read_manifest(dataset_dir: Path | str) -> list[ManifestEntry]:
             )
         reader.fieldnames = header
         return [_entry(row, reader.line_num, folder, manifest) for row in reader]
+
+
+def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
+    """The room graph of a dataset: ``dataset_dir/edges.csv`` rows ``room_a,room_b``.
+
+    The file is optional: none gives no edges. Raises :class:`ManifestError` naming the file and
+    line for a missing column, an empty cell or a self-loop.
+    """
+    path = Path(dataset_dir) / EDGES_NAME
+    if not path.is_file():
+        return []
+    with path.open(newline="", encoding="utf-8-sig") as handle:
+        reader = csv.DictReader(handle)
+        header = [name.strip() for name in reader.fieldnames or []]
+        if any(column not in header for column in EDGES_COLUMNS):
+            raise ManifestError(
+                f"{path} must have the header {','.join(EDGES_COLUMNS)} (got {','.join(header)})",
+                path,
+            )
+        reader.fieldnames = header
+        edges = []
+        for row in reader:
+            a, b = ((row[c] or "").strip() for c in EDGES_COLUMNS)
+            if not a or not b or a == b:
+                raise ManifestError(
+                    f"{path} line {reader.line_num}: an edge needs two different rooms, "
+                    f"got {a!r} and {b!r}",
+                    path,
+                )
+            edges.append((a, b))
+        return edges
 
 
 def sha256_file(path: Path, chunk_bytes: int = 1 << 20) -> str:

@@ -4,6 +4,7 @@ Layout of the folder::
 
     manifest.csv      image,room,x_m,y_m,heading_deg  (one row per panorama)
     images/<room>_<k>.png
+    edges.csv         room_a,room_b  (one row per pair of rooms joined by a door)
     render.json       how it was rendered (world, seed, condition, spacing, camera)
 
 ``image`` is relative to the folder. ``x_m``, ``y_m`` and ``heading_deg`` are in the frame of the
@@ -33,6 +34,7 @@ from robot.worlds import make_world
 
 MANIFEST_NAME = "manifest.csv"
 MANIFEST_HEADER = ("image", "room", "x_m", "y_m", "heading_deg")
+EDGES_NAME = "edges.csv"
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,7 @@ def _prepare_folder(out_dir: Path, overwrite: bool) -> None:
                 "pass overwrite=True (--overwrite) to replace it"
             )
         shutil.rmtree(out_dir / "images", ignore_errors=True)
-        for name in (MANIFEST_NAME, "render.json"):
+        for name in (MANIFEST_NAME, EDGES_NAME, "render.json"):
             (out_dir / name).unlink(missing_ok=True)
     (out_dir / "images").mkdir(parents=True, exist_ok=True)
 
@@ -114,6 +116,8 @@ def render_dataset(
             raise OSError(f"could not write {out / name}")
         rows.append(ManifestRow(name, place.room, place.x_m, place.y_m, round(heading, 6)))
     _write_render_info(out, world_name, seed, condition, spacing_m or world.place_spacing_m, camera)
+    edges = sorted({(min(d.room_a, d.room_b), max(d.room_a, d.room_b)) for d in world.doors})
+    write_edges(out / EDGES_NAME, edges)
     return write_manifest(out / MANIFEST_NAME, rows)
 
 
@@ -123,6 +127,15 @@ def _write_render_info(
     info = {"world": world, "seed": seed, "condition": condition, "spacing_m": spacing_m}
     info["camera"] = asdict(camera)
     (out / "render.json").write_text(json.dumps(info, indent=2) + "\n")
+
+
+def write_edges(path: Path, edges: list[tuple[str, str]]) -> Path:
+    """Write the room graph's edges as ``room_a,room_b`` rows (header included); return ``path``."""
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(("room_a", "room_b"))
+        writer.writerows(edges)
+    return path
 
 
 def write_manifest(path: Path, rows: list[ManifestRow]) -> Path:

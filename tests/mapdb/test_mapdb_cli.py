@@ -48,6 +48,17 @@ def test_build_then_rerun_is_idempotent(make_dataset, db_path: Path) -> None:
 
 
 @pytest.mark.usefixtures("fake_extractor")
+def test_build_connects_the_rooms_listed_in_edges_csv(make_dataset, db_path: Path) -> None:
+    dataset = make_dataset(3)
+    (dataset / "edges.csv").write_text("room_a,room_b\nhall,kitchen\nhall,garden\n")
+    result = build(dataset, db_path, "--workers", "0")
+    assert result.exit_code == 0, result.output
+    assert "connected 1 pair(s) of rooms from edges.csv" in result.stdout
+    with MapDatabase.open(db_path) as map_db:
+        assert map_db.edges() == [("hall", "kitchen")]
+
+
+@pytest.mark.usefixtures("fake_extractor")
 def test_build_with_corrupt_image_imports_the_rest_and_fails(make_dataset, db_path) -> None:
     result = build(make_dataset(5, corrupt=(3,)), db_path, "--workers", "2", "-v")
     assert result.exit_code == 1

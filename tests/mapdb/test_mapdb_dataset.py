@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from mapdb.dataset import read_manifest, sha256_file
+from mapdb.dataset import read_edges, read_manifest, sha256_file
 from mapdb.errors import ManifestError
 
 
@@ -69,3 +69,24 @@ def test_sha256_file_matches_hashlib(tmp_path: Path) -> None:
     data = bytes(range(256)) * 5000
     path.write_bytes(data)
     assert sha256_file(path, chunk_bytes=1000) == hashlib.sha256(data).hexdigest()
+
+
+def test_edges_csv_is_optional(tmp_path):
+    assert read_edges(tmp_path) == []
+
+
+def test_edges_csv_rows_are_room_pairs(tmp_path):
+    (tmp_path / "edges.csv").write_text("room_a,room_b\nhall,office\nhall,kitchen\n")
+    assert read_edges(tmp_path) == [("hall", "office"), ("hall", "kitchen")]
+
+
+def test_an_edge_to_itself_names_the_file_and_line(tmp_path):
+    (tmp_path / "edges.csv").write_text("room_a,room_b\nhall,hall\n")
+    with pytest.raises(ManifestError, match=r"edges.csv line 2"):
+        read_edges(tmp_path)
+
+
+def test_an_edges_file_without_its_header_is_rejected(tmp_path):
+    (tmp_path / "edges.csv").write_text("a,b\nhall,office\n")
+    with pytest.raises(ManifestError, match="room_a,room_b"):
+        read_edges(tmp_path)

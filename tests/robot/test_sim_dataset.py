@@ -50,6 +50,16 @@ def test_manifest_rows_match_images(tmp_path: Path) -> None:
     assert np.array_equal(cv2.cvtColor(written, cv2.COLOR_BGR2RGB), expected)
 
 
+def test_a_building_dataset_lists_the_rooms_joined_by_doors(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    render_dataset(out, "building", spacing_m=4.0, camera=TINY, progress=False)
+    with (out / "edges.csv").open() as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["room_a", "room_b"]
+    doors = make_world("building").doors
+    assert {tuple(r) for r in rows[1:]} == {tuple(sorted((d.room_a, d.room_b))) for d in doors}
+
+
 def test_random_headings_and_grey(tmp_path: Path) -> None:
     rows = read_manifest(render_tiny(tmp_path / "ds", heading_deg=None, grey=True, seed=2))
     headings = [r.heading_deg for r in rows]

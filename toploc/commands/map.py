@@ -26,7 +26,7 @@ from tqdm import tqdm
 from localizer.fingerprint import Fingerprint
 from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
 from mapdb.database import MapDatabase
-from mapdb.dataset import ManifestEntry, read_manifest
+from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import export_graphml
 from mapdb.records import MapInfo
@@ -107,6 +107,12 @@ def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
         raise click.ClickException(f"{len(failed)} image(s) failed: {', '.join(failed)}")
 
 
+def _connect_edges(map_db: MapDatabase, edges: list[tuple[str, str]]) -> int:
+    """Add the dataset's room-graph edges whose rooms are in the map; the number added."""
+    known = {room.name for room in map_db.rooms()}
+    return sum(map_db.connect_rooms(a, b) for a, b in edges if a in known and b in known)
+
+
 db_option = click.option(
     "--db",
     "db_path",
@@ -147,10 +153,12 @@ def build_command(
     """Import the panoramas of DATASET (a folder with manifest.csv) into the map.
 
     Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
+    An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
     """
     presets = parse_detectors(detectors)
     with _map_errors():
         entries = read_manifest(dataset)
+        edges = read_edges(dataset)
         with MapDatabase.open(db_path) as map_db:
             report = build_map(
                 map_db,
@@ -160,6 +168,10 @@ def build_command(
                 progress=progress,
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
             )
+            if not report.interrupted:
+                added = _connect_edges(map_db, edges)
+                if added:
+                    click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
     _finish(report, db_path, verbose)
 
 
