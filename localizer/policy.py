@@ -1,0 +1,293 @@
+"""Active disambiguation: where to drive (by ALV homing) when the belief over rooms is ambiguous.
+
+A policy picks the id of a stored place to home to; the caller homes there, captures, updates
+the belief, adds the place to ``tried`` and asks again while the belief stays ambiguous.
+Positions are metres in the frame of the place's own room (the map is topological: rooms do not
+share a frame, so distances are only taken between places of the same room).
+
+Two policies, registered by name in :data:`POLICIES`:
+
+- ``"most-likely"`` (:class:`ThesisPolicy`), Goldhoorn 2008: the best-matching place of the most
+  likely room.
+- ``"separating"`` (:class:`DiscriminativePolicy`): the place of the most likely room whose
+  stored view is least like the views of the rival rooms, minus a travel cost.
+
+Pure core: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+
+from localizer.belief import PlaceScore
+
+
+@dataclass(frozen=True)
+class MapPlace:
+    """A stored place of the map: id, room, and position in the room's frame (``None`` if
+    unknown)."""
+
+    place_id: int
+    room: str
+    x_m: float | None = None
+    y_m: float | None = None
+
+    @property
+    def xy_m(self) -> tuple[float, float] | None:
+        """``(x_m, y_m)`` or ``None`` when either is unknown."""
+        if self.x_m is None or self.y_m is None:
+            return None
+        return (float(self.x_m), float(self.y_m))
+
+
+@dataclass(frozen=True)
+class PolicyContext:
+    """What the caller knows beyond belief and evidence.
+
+    ``position_xy_m_by_room``: the robot's position under each room hypothesis, in that room's
+    frame (e.g. from homing and odometry). Where missing, the position of the room's
+    best-matching place in the latest evidence is used.
+    """
+
+    position_xy_m_by_room: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class PlaceSimilarity:
+    """Precomputed similarity between stored places (computed by the caller with the evidence
+    code).
+
+    ``inliers[i, j]``: verified inliers when the panorama of ``place_ids[i]`` is the query and
+    ``place_ids[j]`` the reference. The diagonal is the self-match (matching a stored panorama
+    against itself, or its keypoint count): the scale that the other entries are divided by.
+    """
+
+    place_ids: tuple[int, ...]
+    inliers: np.ndarray
+
+    def __post_init__(self) -> None:
+        matrix = np.asarray(self.inliers, dtype=float)
+        n = len(self.place_ids)
+        if matrix.shape != (n, n):
+            raise ValueError(f"inliers has shape {matrix.shape}, expected ({n}, {n}) for place_ids")
+        if len(set(self.place_ids)) != n:
+            raise ValueError(f"place_ids must be unique, got {list(self.place_ids)}")
+        if not np.all(np.isfinite(matrix)) or np.any(matrix < 0):
+            raise ValueError("inliers must be finite and >= 0")
+        object.__setattr__(self, "place_ids", tuple(int(p) for p in self.place_ids))
+        object.__setattr__(self, "inliers", matrix)
+        object.__setattr__(self, "_index", {p: i for i, p in enumerate(self.place_ids)})
+
+    def index(self, place_id: int) -> int:
+        """Row/column of ``place_id``; ``ValueError`` if the matrix does not cover it."""
+        try:
+            return self._index[place_id]  # type: ignore[attr-defined]
+        except KeyError:
+            raise ValueError(f"place {place_id} is not in the similarity matrix") from None
+
+
+class Policy(Protocol):
+    """Chooses the place to home to next."""
+
+    name: ClassVar[str]
+
+    def choose(
+        self,
+        belief: Mapping[str, float] | Any,
+        evidence: Sequence[PlaceScore],
+        places: Sequence[MapPlace],
+        tried: set[int],
+        context: PolicyContext | None = None,
+    ) -> int | None:
+        """Target place id, or ``None`` if every candidate has been tried.
+
+        ``belief``: ``{room: probability}`` or anything with ``as_dict()`` (a ``RoomBelief``).
+        ``evidence``: the latest frame's per-place inliers. ``tried``: place ids already visited.
+        """
+        ...
+
+
+def _belief_map(belief: Mapping[str, float] | Any) -> dict[str, float]:
+    mapping = belief.as_dict() if hasattr(belief, "as_dict") else belief
+    return {str(room): float(p) for room, p in dict(mapping).items()}
+
+
+def _ranked_rooms(belief: Mapping[str, float], min_probability: float) -> list[str]:
+    """Rooms from most to least likely (ties by name), keeping those above ``min_probability``."""
+    ranked = sorted(belief.items(), key=lambda rp: (-rp[1], rp[0]))
+    return [room for room, p in ranked if p > min_probability]
+
+
+def _inliers_by_place(evidence: Iterable[PlaceScore]) -> dict[int, int]:
+    best: dict[int, int] = {}
+    for item in evidence:
+        best[int(item.place_id)] = max(best.get(int(item.place_id), 0), int(item.inliers))
+    return best
+
+
+def _untried(places: Sequence[MapPlace], room: str, tried: set[int]) -> list[MapPlace]:
+    return [p for p in places if p.room == room and p.place_id not in tried]
+
+
+@dataclass
+class ThesisPolicy:
+    """Goldhoorn 2008: home to the best place (most inliers in the latest evidence) of the most
+    likely room not yet tried; when all of that room's places are tried, the next room.
+
+    Rooms with probability <= ``min_room_probability`` are not candidates. Ties: lower place id.
+    """
+
+    name: ClassVar[str] = "most-likely"
+    min_room_probability: float = 0.0
+
+    def choose(
+        self,
+        belief: Mapping[str, float] | Any,
+        evidence: Sequence[PlaceScore],
+        places: Sequence[MapPlace],
+        tried: set[int],
+        context: PolicyContext | None = None,
+    ) -> int | None:
+        inliers = _inliers_by_place(evidence)
+        for room in _ranked_rooms(_belief_map(belief), self.min_room_probability):
+            candidates = _untried(places, room, tried)
+            if candidates:
+                best = max(candidates, key=lambda p: (inliers.get(p.place_id, 0), -p.place_id))
+                return best.place_id
+        return None
+
+
+@dataclass
+class DiscriminativePolicy:
+    """Home to the place of the most likely room whose view best separates it from the rivals.
+
+    For each untried place ``c`` of the most likely room ``R`` (the next room once all of
+    ``R``'s places are tried), with rivals ``r`` = the other rooms with probability
+    >= ``min_rival_probability`` and weights ``w_r = p(r) / sum of rival p``:
+
+        confusion(c)  = sum_r w_r * max_{q in places(r)} S[c, q] / S[c, c]     (clipped to [0, 1])
+        separation(c) = 1 - confusion(c)
+        score(c)      = separation(c) - travel_cost_per_m * distance_m(c)
+
+    ``S`` is :class:`PlaceSimilarity` (``S[c, c]`` the self-match; a place with ``S[c, c] = 0``
+    has separation 0). ``confusion`` is the fraction of ``c``'s own view that the best look-alike
+    place of a rival room also explains: 1 for identical views (office_a/office_b away from
+    their doors), lower where ``c`` sees something only ``R`` has (the view through the door).
+    ``distance_m(c)``: from the robot's position under hypothesis ``R`` (context, else the best
+    matching place of ``R`` in the evidence) to ``c``, 0 if either is unknown.
+    ``travel_cost_per_m = 0.02``: one metre of travel is worth two percentage points of
+    separation, so among equally separating places the nearest wins, and a place 5 m further
+    must separate 10 points better. Ties: more inliers in the evidence, then lower place id.
+    With no rivals it falls back to the nearest place (``separation`` is 1 for all).
+    """
+
+    similarity: PlaceSimilarity
+    name: ClassVar[str] = "separating"
+    min_rival_probability: float = 0.02
+    travel_cost_per_m: float = 0.02
+    min_room_probability: float = 0.0
+
+    def choose(
+        self,
+        belief: Mapping[str, float] | Any,
+        evidence: Sequence[PlaceScore],
+        places: Sequence[MapPlace],
+        tried: set[int],
+        context: PolicyContext | None = None,
+    ) -> int | None:
+        probabilities = _belief_map(belief)
+        inliers = _inliers_by_place(evidence)
+        for room in _ranked_rooms(probabilities, self.min_room_probability):
+            candidates = _untried(places, room, tried)
+            if not candidates:
+                continue
+            here = _position_in_room(room, places, inliers, context)
+            scored = [
+                (
+                    self.score(c, room, probabilities, places, here),
+                    inliers.get(c.place_id, 0),
+                    -c.place_id,
+                )
+                for c in candidates
+            ]
+            return -max(scored)[2]
+        return None
+
+    def score(
+        self,
+        candidate: MapPlace,
+        room: str,
+        belief: Mapping[str, float],
+        places: Sequence[MapPlace],
+        here_xy_m: tuple[float, float] | None,
+    ) -> float:
+        """``separation - travel_cost_per_m * distance_m`` of ``candidate`` under hypothesis
+        ``room`` (see the class docstring)."""
+        distance_m = 0.0
+        if here_xy_m is not None and candidate.xy_m is not None:
+            distance_m = math.dist(here_xy_m, candidate.xy_m)
+        return self.separation(candidate.place_id, room, belief, places) - (
+            self.travel_cost_per_m * distance_m
+        )
+
+    def separation(
+        self, place_id: int, room: str, belief: Mapping[str, float], places: Sequence[MapPlace]
+    ) -> float:
+        """``1 - confusion`` of ``place_id`` against the rivals of ``room`` (in [0, 1])."""
+        row = self.similarity.inliers[self.similarity.index(place_id)]
+        own = row[self.similarity.index(place_id)]
+        rivals = {r: p for r, p in belief.items() if r != room and p >= self.min_rival_probability}
+        total = sum(rivals.values())
+        if total <= 0:
+            return 1.0
+        if own <= 0:
+            return 0.0
+        confusion = 0.0
+        for rival, p in rivals.items():
+            columns = [self.similarity.index(q.place_id) for q in places if q.room == rival]
+            if columns:
+                confusion += (p / total) * min(1.0, float(row[columns].max()) / own)
+        return 1.0 - confusion
+
+
+def _position_in_room(
+    room: str,
+    places: Sequence[MapPlace],
+    inliers: Mapping[int, int],
+    context: PolicyContext | None,
+) -> tuple[float, float] | None:
+    """The robot's position under hypothesis ``room``: from context, else its best-matching
+    place of that room in the evidence (``None`` if unknown)."""
+    if context is not None and room in context.position_xy_m_by_room:
+        x_m, y_m = context.position_xy_m_by_room[room]
+        return (float(x_m), float(y_m))
+    in_room = [p for p in places if p.room == room and inliers.get(p.place_id, 0) > 0]
+    if not in_room:
+        return None
+    return max(in_room, key=lambda p: (inliers[p.place_id], -p.place_id)).xy_m
+
+
+POLICIES: dict[str, type] = {
+    ThesisPolicy.name: ThesisPolicy,
+    DiscriminativePolicy.name: DiscriminativePolicy,
+}
+
+
+def make_policy(name: str, **kwargs: Any) -> Policy:
+    """The policy registered as ``name`` in :data:`POLICIES`, built with ``kwargs``
+    (``"separating"`` needs ``similarity=PlaceSimilarity(...)``)."""
+    try:
+        cls = POLICIES[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown disambiguation policy {name!r}; known: {', '.join(sorted(POLICIES))}"
+        ) from None
+    try:
+        return cls(**kwargs)
+    except TypeError as error:
+        raise ValueError(f"cannot build policy {name!r} with {sorted(kwargs)}: {error}") from error

@@ -1,0 +1,320 @@
+"""Likelihood model, Bayes filter over the room graph, and the localized/ambiguous/lost test."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from localizer.belief import (
+    BeliefFilter,
+    LikelihoodModel,
+    LocalizationState,
+    RoomBelief,
+    StateThresholds,
+    classify,
+    entropy_bits,
+    predict_on_graph,
+    room_inliers,
+    room_likelihood,
+    transition_matrix,
+)
+
+ROOMS = ("office_a", "office_b", "corridor", "lab", "kitchen")
+EDGES = (("office_a", "corridor"), ("office_b", "corridor"), ("lab", "corridor"))
+
+
+@dataclass(frozen=True)
+class Ev:
+    place_id: int
+    room: str
+    inliers: int
+
+
+def evidence_for(inliers_by_room: dict[str, int]) -> list[Ev]:
+    """One place per room with the given inliers, plus a weaker second place per room."""
+    out = []
+    for i, (room, n) in enumerate(inliers_by_room.items()):
+        out += [Ev(2 * i, room, n), Ev(2 * i + 1, room, n // 3)]
+    return out
+
+
+# ---- likelihood ------------------------------------------------------------------------------
+
+
+def test_zero_inlier_room_keeps_the_floor_and_cannot_be_zeroed():
+    """8000 against 0 inliers would underflow exp() to exactly 0 without the floor."""
+    model = LikelihoodModel()
+    lik = room_likelihood(evidence_for({"office_a": 8000, "office_b": 0}), ROOMS, model)
+    n = len(ROOMS)
+    assert lik[ROOMS.index("office_b")] >= model.floor / n - 1e-12
+    belief = BeliefFilter(ROOMS, EDGES)
+    belief.update(lik)
+    odds = belief.probabilities[1] / belief.probabilities[0]
+    assert odds >= (model.floor / n) / (1 - model.floor + model.floor / n) - 1e-12
+    for _ in range(5):
+        belief.update(lik)
+    assert np.all(belief.probabilities > 0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    counts=st.lists(st.integers(0, 2000), min_size=1, max_size=8),
+    temperature=st.floats(0.5, 200),
+    floor=st.floats(1e-4, 1.0),
+)
+def test_likelihood_is_a_distribution_with_the_floor(counts, temperature, floor):
+    model = LikelihoodModel(temperature_inliers=temperature, floor=floor)
+    lik = model.from_room_inliers(np.array(counts, dtype=float))
+    assert lik.shape == (len(counts),)
+    assert np.all(lik >= floor / len(counts) - 1e-12)
+    assert math.isclose(lik.sum(), 1.0, rel_tol=1e-9)
+    order = np.argsort(counts, kind="stable")
+    assert np.all(np.diff(lik[order]) >= -1e-12), "more inliers never lowers the likelihood"
+
+
+def test_ten_inlier_difference_is_worth_the_documented_factor():
+    """Two rooms, n and n + 10 inliers: ratio = ((1-f) e/(1+e) + f/2) / ((1-f)/(1+e) + f/2)."""
+    model = LikelihoodModel()
+    f = model.floor
+    e = math.exp(10 / model.temperature_inliers)
+    expected = ((1 - f) * e / (1 + e) + f / 2) / ((1 - f) / (1 + e) + f / 2)
+    for base in (30, 300):  # depends only on the difference
+        lik = room_likelihood([Ev(0, "a", base), Ev(1, "b", base + 10)], ["a", "b"], model)
+        assert lik[1] / lik[0] == pytest.approx(expected)
+    assert 1.8 < expected < 2.0  # the docstring's "1.88 after the floor"
+
+
+def test_nothing_matched_gives_a_flat_likelihood():
+    model = LikelihoodModel(min_inliers=20)
+    lik = room_likelihood(evidence_for({"office_a": 19, "lab": 5}), ROOMS, model)
+    np.testing.assert_allclose(lik, np.full(len(ROOMS), 1 / len(ROOMS)))
+    np.testing.assert_allclose(room_likelihood([], ROOMS, model), 1 / len(ROOMS))
+
+
+def test_room_inliers_takes_the_best_place_and_rejects_unknown_rooms():
+    counts = room_inliers([Ev(1, "lab", 40), Ev(2, "lab", 90), Ev(3, "corridor", 7)], ROOMS)
+    assert counts[ROOMS.index("lab")] == 90
+    assert counts[ROOMS.index("corridor")] == 7
+    assert counts[ROOMS.index("office_a")] == 0
+    with pytest.raises(ValueError, match="attic"):
+        room_inliers([Ev(1, "attic", 40)], ROOMS)
+    with pytest.raises(ValueError, match="-3 inliers"):
+        room_inliers([Ev(1, "lab", -3)], ROOMS)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"temperature_inliers": 0.0}, "temperature"),
+        ({"floor": 0.0}, "floor"),
+        ({"floor": 1.5}, "floor"),
+        ({"min_inliers": -1}, "min_inliers"),
+    ],
+)
+def test_likelihood_model_rejects_bad_parameters(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        LikelihoodModel(**kwargs)
+
+
+# ---- prediction ------------------------------------------------------------------------------
+
+
+def naive_predict(belief, rooms, edges, stay):
+    """The obvious double loop: each room keeps `stay`, gives the rest equally to neighbours."""
+    neighbours = {room: set() for room in rooms}
+    for a, b in edges:
+        if a != b:
+            neighbours[a].add(b)
+            neighbours[b].add(a)
+    prior = dict.fromkeys(rooms, 0.0)
+    for room, p in zip(rooms, belief, strict=True):
+        if not neighbours[room]:
+            prior[room] += p
+            continue
+        prior[room] += p * stay
+        for other in neighbours[room]:
+            prior[other] += p * (1 - stay) / len(neighbours[room])
+    return np.array([prior[r] for r in rooms])
+
+
+def test_prediction_matches_the_naive_loop_on_random_graphs():
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(1, 9))
+        rooms = [f"r{i}" for i in range(n)]
+        edges = [
+            (rooms[i], rooms[j]) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.35
+        ]
+        stay = float(rng.random())
+        belief = rng.dirichlet(np.ones(n))
+        fast = predict_on_graph(belief, transition_matrix(rooms, edges, stay))
+        np.testing.assert_allclose(fast, naive_predict(belief, rooms, edges, stay), atol=1e-12)
+        assert fast.sum() == pytest.approx(1.0)
+
+
+def test_prediction_spreads_only_along_graph_edges():
+    belief = BeliefFilter(ROOMS, EDGES, stay_probability=0.7)
+    belief.reset({"office_a": 1.0})
+    after_one = dict(zip(ROOMS, belief.predict(), strict=True))
+    assert after_one["office_a"] == pytest.approx(0.7)
+    assert after_one["corridor"] == pytest.approx(0.3)
+    assert after_one["office_b"] == after_one["lab"] == after_one["kitchen"] == 0.0
+    after_two = dict(zip(ROOMS, belief.predict(), strict=True))
+    assert after_two["office_b"] > 0 and after_two["lab"] > 0  # two hops, through the corridor
+    assert after_two["kitchen"] == 0.0  # no edge at all
+    assert sum(after_two.values()) == pytest.approx(1.0)
+
+
+def test_stay_probability_override_is_for_one_move_only():
+    belief = BeliefFilter(ROOMS, EDGES, stay_probability=0.5)
+    belief.reset({"lab": 1.0})
+    assert belief.predict(stay_probability=1.0)[ROOMS.index("lab")] == pytest.approx(1.0)
+    assert belief.predict()[ROOMS.index("lab")] == pytest.approx(0.5)
+
+
+def test_transition_rejects_unknown_rooms_and_bad_stay():
+    with pytest.raises(ValueError, match="attic"):
+        transition_matrix(ROOMS, [("lab", "attic")], 0.8)
+    with pytest.raises(ValueError, match="stay_probability"):
+        transition_matrix(ROOMS, EDGES, 1.2)
+    with pytest.raises(ValueError, match="unique"):
+        BeliefFilter(["lab", "lab"])
+
+
+# ---- update and state ------------------------------------------------------------------------
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    prior=st.lists(st.floats(0.0, 10.0), min_size=5, max_size=5).filter(lambda w: sum(w) > 1e-6),
+    counts=st.lists(st.integers(0, 1000), min_size=5, max_size=5),
+    moves=st.lists(st.booleans(), max_size=4),
+)
+def test_belief_stays_a_distribution(prior, counts, moves):
+    belief = BeliefFilter(ROOMS, EDGES)
+    belief.reset(dict(zip(ROOMS, prior, strict=True)))
+    lik = LikelihoodModel().from_room_inliers(np.array(counts, dtype=float))
+    for moved in moves:
+        if moved:
+            belief.predict()
+        belief.update(lik)
+    p = belief.probabilities
+    assert np.all(p >= 0)
+    assert p.sum() == pytest.approx(1.0)
+
+
+def test_consistent_updates_converge_to_localized():
+    belief = BeliefFilter(ROOMS, EDGES)
+    evidence = evidence_for({"office_a": 310, "office_b": 300, "corridor": 15, "lab": 12})
+    lik = room_likelihood(evidence, ROOMS)
+    states = []
+    for _ in range(6):
+        belief.update(lik)
+        states.append(classify(belief.probabilities, evidence_max_inliers=310))
+    assert states[0] is LocalizationState.AMBIGUOUS
+    assert states[-1] is LocalizationState.LOCALIZED
+    assert ROOMS[int(np.argmax(belief.probabilities))] == "office_a"
+
+
+def test_two_equal_rooms_are_ambiguous():
+    belief = BeliefFilter(ROOMS, EDGES)
+    evidence = evidence_for({"office_a": 300, "office_b": 300, "corridor": 10})
+    for _ in range(10):
+        belief.update(room_likelihood(evidence, ROOMS))
+    p = belief.probabilities
+    assert p[0] == pytest.approx(p[1])
+    assert classify(p, evidence_max_inliers=300) is LocalizationState.AMBIGUOUS
+    snapshot = RoomBelief.from_probabilities(ROOMS, p, evidence=evidence)
+    assert snapshot.state is LocalizationState.AMBIGUOUS
+    assert {snapshot.top[0], snapshot.second[0]} == {"office_a", "office_b"}
+
+
+def test_all_zero_evidence_is_lost_and_leaves_the_belief_alone():
+    belief = BeliefFilter(ROOMS, EDGES)
+    belief.reset({"lab": 0.9, "corridor": 0.1})
+    before = belief.probabilities
+    evidence = [Ev(i, room, 0) for i, room in enumerate(ROOMS)]
+    after = belief.update(room_likelihood(evidence, ROOMS))
+    np.testing.assert_allclose(after, before)
+    assert classify(after, evidence_max_inliers=0) is LocalizationState.LOST
+    assert RoomBelief.from_probabilities(ROOMS, after, evidence=evidence).state == "lost"
+
+
+def test_classify_thresholds_are_configuration():
+    p = np.array([0.8, 0.2])  # ratio 4, 0.72 bits
+    assert classify(p) is LocalizationState.AMBIGUOUS
+    assert classify(p, StateThresholds(localized_ratio=4.0)) is LocalizationState.LOCALIZED
+    strict = StateThresholds(localized_ratio=4.0, max_entropy_bits=0.5)
+    assert classify(p, strict) is LocalizationState.AMBIGUOUS
+    assert classify(np.array([1.0])) is LocalizationState.LOCALIZED
+    with pytest.raises(ValueError, match="localized_ratio"):
+        StateThresholds(localized_ratio=0.5)
+
+
+def test_reset_with_a_prior_and_uniform():
+    belief = BeliefFilter(ROOMS, EDGES)
+    belief.reset({"lab": 3.0, "corridor": 1.0})
+    assert belief.as_dict()["lab"] == pytest.approx(0.75)
+    assert belief.as_dict()["office_a"] == 0.0
+    belief.reset()
+    np.testing.assert_allclose(belief.probabilities, 1 / len(ROOMS))
+
+
+@pytest.mark.parametrize(
+    "prior, match",
+    [
+        ({"attic": 1.0}, "unknown room 'attic'"),
+        ({"lab": -0.1, "corridor": 1.0}, "'lab' must be >= 0"),
+        ({"lab": math.nan}, "'lab' must be >= 0"),
+        ({"lab": 0.0, "corridor": 0.0}, "all zero"),
+        ({}, "all zero"),
+    ],
+)
+def test_reset_rejects_bad_priors(prior, match):
+    belief = BeliefFilter(ROOMS, EDGES)
+    with pytest.raises(ValueError, match=match):
+        belief.reset(prior)
+    np.testing.assert_allclose(belief.probabilities, 1 / len(ROOMS))  # unchanged
+
+
+def test_update_rejects_bad_likelihoods():
+    belief = BeliefFilter(ROOMS, EDGES)
+    with pytest.raises(ValueError, match="shape"):
+        belief.update(np.ones(3))
+    with pytest.raises(ValueError, match=">= 0"):
+        belief.update(np.array([1, 1, 1, 1, -1.0]))
+    belief.reset({"lab": 1.0})
+    with pytest.raises(ValueError, match="zero wherever"):
+        belief.update(np.array([1.0, 1.0, 1.0, 0.0, 1.0]))
+
+
+def test_entropy_bits():
+    assert entropy_bits(np.array([0.5, 0.5])) == pytest.approx(1.0)
+    assert entropy_bits(np.full(4, 0.25)) == pytest.approx(2.0)
+    assert entropy_bits(np.array([1.0, 0.0])) == pytest.approx(0.0)
+
+
+def test_room_belief_json_round_trip():
+    evidence = evidence_for({"office_a": 120, "lab": 40})
+    p = np.array([0.6, 0.3, 0.05, 0.05, 0.0])
+    snapshot = RoomBelief.from_probabilities(ROOMS, p, evidence=evidence, stamp_s=12.5)
+    data = snapshot.to_json()
+    assert data["rooms"] == pytest.approx(dict(zip(ROOMS, p, strict=True)))
+    assert data["state"] == "ambiguous"
+    assert data["top"] == {"room": "office_a", "probability": 0.6}
+    assert data["second"]["room"] == "office_b"
+    assert data["top_two_ratio"] == pytest.approx(2.0)
+    assert data["best_place"] == {"place_id": 0, "inliers": 120}
+    assert data["entropy_bits"] == pytest.approx(entropy_bits(p))
+    assert RoomBelief.from_json(data) == snapshot
+    homing = RoomBelief.from_json({**data, "state": "homing"})
+    assert homing.state is LocalizationState.HOMING
+    with pytest.raises(ValueError, match="schema"):
+        RoomBelief.from_json({**data, "schema": 99})
+    with pytest.raises(ValueError, match="not a belief"):
+        RoomBelief.from_json({k: v for k, v in data.items() if k != "state"})

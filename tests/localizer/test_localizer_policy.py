@@ -1,0 +1,279 @@
+"""Disambiguation policies: the thesis's "most likely" and the "separating" one, and a comparison
+on a synthetic look-alike world (run this file as a script to print the comparison)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from localizer.belief import (
+    BeliefFilter,
+    LocalizationState,
+    RoomBelief,
+    classify,
+    room_likelihood,
+)
+from localizer.policy import (
+    POLICIES,
+    DiscriminativePolicy,
+    MapPlace,
+    PlaceSimilarity,
+    PolicyContext,
+    ThesisPolicy,
+    make_policy,
+)
+
+
+@dataclass(frozen=True)
+class Ev:
+    place_id: int
+    room: str
+    inliers: int
+
+
+# ---- the thesis policy -----------------------------------------------------------------------
+
+PLACES = [
+    MapPlace(1, "a", 0.0, 0.0),
+    MapPlace(2, "a", 1.0, 0.0),
+    MapPlace(3, "a", 2.0, 0.0),
+    MapPlace(11, "b", 0.0, 0.0),
+    MapPlace(12, "b", 1.0, 0.0),
+    MapPlace(21, "c", 0.0, 0.0),
+]
+EVIDENCE = [Ev(1, "a", 40), Ev(2, "a", 250), Ev(3, "a", 90), Ev(11, "b", 260), Ev(12, "b", 30)]
+
+
+def test_thesis_picks_the_best_place_of_the_most_likely_room():
+    policy = ThesisPolicy()
+    belief = {"a": 0.6, "b": 0.35, "c": 0.05}
+    # b's place 11 has the most inliers overall, but a is the most likely room
+    assert policy.choose(belief, EVIDENCE, PLACES, set()) == 2
+    assert policy.choose(belief, EVIDENCE, PLACES, {2}) == 3
+    assert policy.choose(belief, EVIDENCE, PLACES, {2, 3}) == 1
+
+
+def test_thesis_moves_to_the_next_room_then_gives_up():
+    policy = ThesisPolicy()
+    belief = {"a": 0.6, "b": 0.35, "c": 0.05}
+    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3}) == 11
+    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11}) == 12
+    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12}) == 21  # no evidence there
+    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12, 21}) is None
+    assert (
+        ThesisPolicy(min_room_probability=0.1).choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12})
+        is None
+    )
+
+
+def test_thesis_accepts_a_room_belief_snapshot():
+    snapshot = RoomBelief.from_probabilities(("a", "b", "c"), np.array([0.2, 0.7, 0.1]))
+    assert ThesisPolicy().choose(snapshot, EVIDENCE, PLACES, set()) == 11
+
+
+# ---- the separating policy -------------------------------------------------------------------
+
+
+def lookalike_similarity(door_place: int = 3, door_loss: float = 0.4) -> PlaceSimilarity:
+    """Rooms a and b identical except at one place of a (``door_place``), whose view through the
+    door the b places explain only partly. Self-match 400, same-room 200, look-alike twin 380."""
+    ids = [p.place_id for p in PLACES]
+    room = {p.place_id: p.room for p in PLACES}
+    twin = {1: 11, 2: 12, 3: 12, 11: 1, 12: 2}
+    matrix = np.full((len(ids), len(ids)), 10.0)
+    for i, pi in enumerate(ids):
+        for j, pj in enumerate(ids):
+            if pi == pj:
+                matrix[i, j] = 400
+            elif room[pi] == room[pj]:
+                matrix[i, j] = 200
+            elif twin.get(pi) == pj:
+                matrix[i, j] = 380
+            elif room[pi] in "ab" and room[pj] in "ab":
+                matrix[i, j] = 180
+    row = ids.index(door_place)
+    for j, pj in enumerate(ids):
+        if room[pj] == "b":
+            matrix[row, j] *= 1 - door_loss
+    return PlaceSimilarity(tuple(ids), matrix)
+
+
+def test_separating_picks_the_place_that_differs():
+    belief = {"a": 0.5, "b": 0.45, "c": 0.05}
+    for door_place in (1, 2, 3):
+        policy = DiscriminativePolicy(lookalike_similarity(door_place), travel_cost_per_m=0.0)
+        assert policy.choose(belief, EVIDENCE, PLACES, set()) == door_place
+    # the thesis goes to the best-matching place instead, however the rooms differ
+    assert ThesisPolicy().choose(belief, EVIDENCE, PLACES, set()) == 2
+
+
+def test_separating_score_is_documented_formula():
+    similarity = lookalike_similarity(3, door_loss=0.4)
+    policy = DiscriminativePolicy(similarity, travel_cost_per_m=0.0, min_rival_probability=0.02)
+    belief = {"a": 0.5, "b": 0.45, "c": 0.05}
+    # place 3: best b place explains 380*0.6/400; c explains 10/400; rivals weighted .45/.5, .05/.5
+    expected = 1 - (0.9 * (380 * 0.6 / 400) + 0.1 * (10 / 400))
+    assert policy.separation(3, "a", belief, PLACES) == pytest.approx(expected)
+    assert policy.separation(2, "a", {"a": 1.0}, PLACES) == 1.0  # no rivals
+
+
+def test_separating_trades_separation_against_travel():
+    belief = {"a": 0.5, "b": 0.5, "c": 0.0}
+    similarity = lookalike_similarity(3, door_loss=0.05)  # door place only slightly better
+    here = PolicyContext(position_xy_m_by_room={"a": (0.0, 0.0)})
+    assert (
+        DiscriminativePolicy(similarity, travel_cost_per_m=0.0).choose(
+            belief, EVIDENCE, PLACES, set(), here
+        )
+        == 3
+    )
+    # 2 m to place 3 cost 0.2 > its ~0.05 separation gain: stay near (place 1 is where we are)
+    assert (
+        DiscriminativePolicy(similarity, travel_cost_per_m=0.1).choose(
+            belief, EVIDENCE, PLACES, set(), here
+        )
+        == 1
+    )
+
+
+def test_separating_skips_tried_places_and_rooms():
+    policy = DiscriminativePolicy(lookalike_similarity(3))
+    belief = {"a": 0.5, "b": 0.45, "c": 0.05}
+    assert policy.choose(belief, EVIDENCE, PLACES, {3}) in {1, 2}
+    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3}) in {11, 12}
+    assert policy.choose(belief, EVIDENCE, PLACES, {p.place_id for p in PLACES}) is None
+
+
+def test_similarity_validation_and_missing_places():
+    with pytest.raises(ValueError, match="shape"):
+        PlaceSimilarity((1, 2), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="unique"):
+        PlaceSimilarity((1, 1), np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=">= 0"):
+        PlaceSimilarity((1, 2), -np.ones((2, 2)))
+    partial = PlaceSimilarity((1, 2), np.eye(2))
+    with pytest.raises(ValueError, match="place 3 is not in the similarity matrix"):
+        DiscriminativePolicy(partial).choose({"a": 1.0}, EVIDENCE, PLACES, {1, 2})
+
+
+def test_registry_and_make_policy():
+    assert set(POLICIES) == {"most-likely", "separating"}
+    assert isinstance(make_policy("most-likely"), ThesisPolicy)
+    similarity = lookalike_similarity()
+    assert make_policy("separating", similarity=similarity).similarity is similarity
+    with pytest.raises(ValueError, match=r"unknown disambiguation policy 'greedy'.*most-likely"):
+        make_policy("greedy")
+    with pytest.raises(ValueError, match="cannot build policy 'separating'"):
+        make_policy("separating")
+
+
+# ---- comparison on a synthetic look-alike world ----------------------------------------------
+# Two offices identical in their own frames, 5 places on a line x = 0..4 m, the door at x = 4;
+# the share of a view that only the true office has (the corridor through the door) grows
+# towards the door. Plus a corridor and a lab. A capture at index k of the true office scores
+# every stored place by the same similarity model plus Gaussian noise (sigma 8 inliers).
+
+N_IN_OFFICE = 5
+DOOR_SHARE = (0.0, 0.01, 0.03, 0.08, 0.15)
+WORLD_ROOMS = ("office_a", "office_b", "corridor", "lab")
+WORLD_EDGES = (("office_a", "corridor"), ("office_b", "corridor"), ("lab", "corridor"))
+
+
+def world_places() -> list[MapPlace]:
+    places = []
+    for r, room in enumerate(WORLD_ROOMS):
+        count = N_IN_OFFICE if room.startswith("office") else 3
+        places += [MapPlace(10 * r + k, room, float(k), 0.0) for k in range(count)]
+    return places
+
+
+def view_similarity(room_here: str, k: int, place: MapPlace) -> float:
+    """Expected inliers of a capture at index k of room_here against a stored place."""
+    same_layout = room_here.startswith("office") and place.room.startswith("office")
+    if place.room != room_here and not same_layout:
+        return 10.0
+    base = 300.0 * math.exp(-abs(k - place.x_m) / 1.5)
+    return base if place.room == room_here else base * (1 - DOOR_SHARE[k])
+
+
+def world_similarity(places: list[MapPlace]) -> PlaceSimilarity:
+    matrix = np.array([[view_similarity(c.room, int(c.x_m), q) for q in places] for c in places])
+    np.fill_diagonal(matrix, 400.0)  # self-match
+    return PlaceSimilarity(tuple(p.place_id for p in places), matrix)
+
+
+def run_episode(policy, true_room: str, start_k: int, rng, max_moves: int = 12):
+    """Moves, travel (m) and the final belief's top room; belief updated after each capture."""
+    places = world_places()
+    by_id = {p.place_id: p for p in places}
+    belief = BeliefFilter(WORLD_ROOMS, WORLD_EDGES, stay_probability=0.8)
+    k, moves, travel_m, tried = start_k, 0, 0.0, set()
+
+    def capture():
+        noisy = [
+            Ev(
+                p.place_id,
+                p.room,
+                max(0, round(view_similarity(true_room, k, p) + rng.normal(0, 8))),
+            )
+            for p in places
+        ]
+        belief.update(room_likelihood(noisy, WORLD_ROOMS))
+        return noisy
+
+    evidence = capture()
+    while (
+        classify(belief.probabilities, evidence_max_inliers=300) is not LocalizationState.LOCALIZED
+    ):
+        if moves == max_moves:
+            break
+        target = policy.choose(belief.as_dict(), evidence, places, tried)
+        if target is None:
+            break
+        tried.add(target)
+        moves += 1
+        if by_id[target].room.startswith("office"):  # homing ends at the same spot of the true room
+            new_k = int(by_id[target].x_m)
+            travel_m += abs(new_k - k)
+            k = new_k
+        belief.predict(stay_probability=0.99)  # short move inside the room
+        evidence = capture()
+    top = WORLD_ROOMS[int(np.argmax(belief.probabilities))]
+    return moves, travel_m, top
+
+
+def compare(n_episodes: int, seed: int = 0) -> dict[str, dict[str, float]]:
+    policies = {
+        "most-likely": ThesisPolicy(),
+        "separating": DiscriminativePolicy(world_similarity(world_places())),
+    }
+    results = {}
+    for name, policy in policies.items():
+        rng = np.random.default_rng(seed)
+        runs = [
+            run_episode(policy, ("office_a", "office_b")[i % 2], int(rng.integers(0, 3)), rng)
+            for i in range(n_episodes)
+        ]
+        truth = [("office_a", "office_b")[i % 2] for i in range(n_episodes)]
+        results[name] = {
+            "mean_moves": float(np.mean([r[0] for r in runs])),
+            "mean_travel_m": float(np.mean([r[1] for r in runs])),
+            "correct": float(np.mean([r[2] == t for r, t in zip(runs, truth, strict=True)])),
+        }
+    return results
+
+
+def test_separating_needs_fewer_moves_than_the_thesis_on_lookalike_offices():
+    results = compare(n_episodes=40)
+    thesis, separating = results["most-likely"], results["separating"]
+    assert separating["correct"] >= thesis["correct"]
+    assert separating["mean_moves"] < thesis["mean_moves"]
+    assert separating["correct"] >= 0.9
+
+
+if __name__ == "__main__":
+    for policy_name, figures in compare(n_episodes=400).items():
+        print(policy_name, {k: round(v, 3) for k, v in figures.items()})
