@@ -1,0 +1,310 @@
+"""Closed-loop ALV visual homing on panoramas toward a stored place's fingerprint.
+
+The pure step (:func:`home_step`) turns the current fingerprint and the goal fingerprint (same
+detector) into a home vector in the current robot frame (REP-103: x forward, y left; the vector
+is dimensionless, in ALV units: its direction points home, its length grows with the distance
+to go but is not metres). Two variants:
+
+- ``"thesis"`` (Goldhoorn 2008, sections 2.4 and 5.4): the ALV over *all* feature bearings of
+  each view; the unknown heading difference from the bearing-histogram visual compass
+  (:func:`homing.compass.bearing_shift_rad`, eq. 5.4). No descriptor is used.
+- ``"best"``: features matched by descriptor (:func:`localizer.matching.match_descriptors`,
+  ratio test); the heading difference is the peak of the circular density of the matched
+  bearing differences, matches further than ``outlier_deg`` from it are rejected, and the
+  inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
+  over the inliers only, in both views (the same landmarks here and at the goal).
+
+The loop (:func:`drive_home`) is generic over :class:`robot.interface.Robot`: capture, extract,
+step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
+``[min_step_m, max_step_m]``, times a step scale that halves whenever the home vector reverses
+(it turned by more than ``reverse_deg`` between two steps, in the goal view's frame: an
+overshoot) and recovers by ``scale_up`` otherwise. The robot cannot see ground truth, so arrival
+is decided from the images alone: the home vector is shorter than ``arrive_length`` and, for
+"best", the inliers' median parallax (:attr:`HomeStep.parallax_rad`) is below
+``arrive_parallax_deg`` (a short ALV difference alone also happens far away, by cancellation;
+on renders of the square room both hold within about 0.1 m of the goal), or the step scale
+collapsed below ``converged_scale`` (the robot keeps overshooting a goal closer than the
+shortest step). A bump triggers a sidestep (turn by +-90 degrees, alternating, and drive
+``sidestep_m``); ``max_bumps`` homing moves in a row ending in a bump stop the run with reason
+``"blocked"``. A view with too few features or matches triggers a recovery move (turn by 120
+degrees and drive ``sidestep_m``); ``max_lost`` such views in a row stop it with ``"lost"``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import cv2
+import numpy as np
+
+from homing.alv import HomingError, alv_from_bearings, home_vector
+from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
+from localizer.features import extract_preset
+from localizer.fingerprint import Fingerprint
+from localizer.matching import match_descriptors
+
+if TYPE_CHECKING:  # the protocol only: localizer does not depend on a robot implementation
+    from robot.interface import Robot
+
+HomingVariant = Literal["thesis", "best"]
+VARIANTS: tuple[str, ...] = ("thesis", "best")
+
+
+@dataclass(frozen=True)
+class StepParams:
+    """How one home vector is computed.
+
+    ``compass``: the thesis variant's compass method. ``ratio``: the descriptor ratio test.
+    ``outlier_deg``: the best variant keeps matches whose bearing difference lies within this
+    many degrees of the density peak (parallax makes near landmarks differ by tens of degrees).
+    ``min_matches``: fewer inliers than this is a :class:`HomingError`.
+    """
+
+    variant: HomingVariant = "best"
+    compass: CompassMethod = "histogram"
+    ratio: float = 0.8
+    outlier_deg: float = 45.0
+    min_matches: int = 6
+
+    def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"unknown homing variant {self.variant!r}; use one of {VARIANTS}")
+        if not 0 < self.outlier_deg <= 180:
+            raise ValueError(f"outlier_deg must be in (0, 180], got {self.outlier_deg}")
+
+
+@dataclass(frozen=True)
+class HomeStep:
+    """A home vector ``home_xy`` (2,) in the current robot frame (ALV units), the estimated
+    rotation ``shift_rad`` of the current view against the goal view (a goal feature at bearing
+    b is seen at b + shift_rad), and the number of features it used (inliers for "best").
+
+    ``parallax_rad`` ("best" only, NaN otherwise): the median absolute bearing change of the
+    inliers once the rotation is removed; 0 at the goal, it grows with the distance to it
+    whatever the layout, where the ALV difference can cancel by chance.
+    """
+
+    home_xy: np.ndarray
+    shift_rad: float
+    n_used: int
+    parallax_rad: float = math.nan
+
+    @property
+    def length(self) -> float:
+        """Length of the home vector (ALV units)."""
+        return float(np.hypot(*self.home_xy))
+
+    @property
+    def direction_rad(self) -> float:
+        """Direction of the home vector in the current robot frame (CCW from forward)."""
+        return float(np.arctan2(self.home_xy[1], self.home_xy[0]))
+
+
+def _wrap(angle_rad: np.ndarray | float) -> np.ndarray:
+    return np.mod(np.asarray(angle_rad, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
+
+
+def density_peak_rad(angles_rad: np.ndarray, sigma_deg: float = 4.0, bins: int = 360) -> float:
+    """The mode of a circular density of ``angles_rad`` (von Mises kernel of about
+    ``sigma_deg``), evaluated on ``bins`` directions; in (-pi, pi]."""
+    grid = np.linspace(-np.pi, np.pi, bins, endpoint=False)
+    kappa = 1.0 / math.radians(sigma_deg) ** 2
+    score = np.exp(kappa * (np.cos(grid[:, None] - np.asarray(angles_rad)[None, :]) - 1.0))
+    return float(grid[int(np.argmax(score.sum(axis=1)))])
+
+
+def _thesis_step(
+    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
+) -> HomeStep:
+    if current.n == 0 or goal.n == 0:
+        raise HomingError(f"no features: {current.n} here, {goal.n} at the goal")
+    shift = (
+        bearing_shift_rad(goal.bearings_rad, current.bearings_rad, method=params.compass)
+        if shift_rad is None
+        else shift_rad
+    )
+    alv_here = alv_from_bearings(current.bearings_rad)
+    alv_goal = alv_from_bearings(goal.bearings_rad)
+    return HomeStep(home_vector(alv_here, alv_goal, 0.0, shift), shift, current.n)
+
+
+def matched_inliers(
+    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None = None
+) -> tuple[np.ndarray, float]:
+    """Descriptor matches ``(k, 2)`` [current_row, goal_row] consistent with one rotation, and
+    that rotation (radians, goal -> current bearings; ``shift_rad`` if known, else estimated)."""
+    pairs = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
+    if len(pairs) < params.min_matches:
+        raise HomingError(f"only {len(pairs)} descriptor matches (need {params.min_matches})")
+    here = current.bearings_rad[pairs[:, 0]]
+    there = goal.bearings_rad[pairs[:, 1]]
+    peak = density_peak_rad(_wrap(here - there)) if shift_rad is None else shift_rad
+    inlier = np.abs(_wrap(here - there - peak)) <= math.radians(params.outlier_deg)
+    if inlier.sum() < params.min_matches:
+        raise HomingError(f"only {int(inlier.sum())} matches agree on a rotation")
+    if shift_rad is not None:
+        return pairs[inlier], shift_rad
+    shift = float(matched_shift_rad(there[inlier], here[inlier], np.ones(int(inlier.sum()))))
+    return pairs[inlier], shift
+
+
+def _best_step(
+    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
+) -> HomeStep:
+    pairs, shift = matched_inliers(current, goal, params, shift_rad)
+    alv_here = alv_from_bearings(current.bearings_rad[pairs[:, 0]])
+    alv_goal = alv_from_bearings(goal.bearings_rad[pairs[:, 1]])
+    change = _wrap(current.bearings_rad[pairs[:, 0]] - goal.bearings_rad[pairs[:, 1]] - shift)
+    parallax = float(np.median(np.abs(change)))
+    return HomeStep(home_vector(alv_here, alv_goal, 0.0, shift), shift, len(pairs), parallax)
+
+
+def home_step(
+    current: Fingerprint,
+    goal: Fingerprint,
+    params: StepParams | None = None,
+    shift_rad: float | None = None,
+) -> HomeStep:
+    """The home vector from ``current`` toward ``goal`` (see the module docstring).
+
+    ``shift_rad``: the rotation from the goal view to the current view (a goal feature at
+    bearing b is seen at b + shift_rad; i.e. goal heading minus current heading) when it is
+    known, e.g. from a magnetic compass; None estimates it from the images.
+
+    Raises ``ValueError`` if the fingerprints come from different detectors and
+    :class:`homing.alv.HomingError` when there are too few features or matches.
+    """
+    params = params or StepParams()
+    if current.detector != goal.detector:
+        raise ValueError(f"detectors differ: current {current.detector!r}, goal {goal.detector!r}")
+    if params.variant == "thesis":
+        return _thesis_step(current, goal, params, shift_rad)
+    return _best_step(current, goal, params, shift_rad)
+
+
+@dataclass(frozen=True)
+class HomingParams:
+    """The homing loop's settings (distances in metres; see the module docstring)."""
+
+    step: StepParams = StepParams()
+    gain_m: float = 2.0
+    min_step_m: float = 0.05
+    max_step_m: float = 0.5
+    arrive_length: float = 0.02
+    arrive_parallax_deg: float = 2.0
+    converged_scale: float = 0.2
+    reverse_deg: float = 90.0
+    scale_down: float = 0.5
+    scale_up: float = 1.25
+    max_steps: int = 40
+    max_bumps: int = 3
+    max_lost: int = 2
+    sidestep_m: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_step_m <= self.max_step_m:
+            raise ValueError(f"need 0 < min_step_m <= max_step_m, got {self}")
+        if self.gain_m <= 0 or self.arrive_length < 0 or self.max_steps < 1:
+            raise ValueError(f"gain_m > 0, arrive_length >= 0 and max_steps >= 1, got {self}")
+
+
+@dataclass(frozen=True)
+class HomingResult:
+    """How a homing run ended.
+
+    ``arrived``: the images say the robot is at the goal; ``steps``: moves made (sidesteps
+    included); ``distance_m``: odometric distance driven; ``reason``: ``"arrived"``,
+    ``"converged"``, ``"max_steps"``, ``"blocked"`` or ``"lost"`` (too few features or matches);
+    ``last``: the fingerprint of the last capture; ``lengths``: home-vector length per capture.
+    """
+
+    arrived: bool
+    steps: int
+    distance_m: float
+    reason: str
+    last: Fingerprint
+    lengths: tuple[float, ...] = ()
+
+
+def grey_extractor(preset: str = "sift") -> Callable[[np.ndarray], Fingerprint]:
+    """An ``extract`` for :func:`drive_home`: BGR or grey uint8 panorama -> fingerprint."""
+
+    def extract(image: np.ndarray) -> Fingerprint:
+        grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+        return extract_preset(grey, preset)
+
+    return extract
+
+
+def _arrived(step: HomeStep, p: HomingParams) -> bool:
+    """The image-only arrival test: a short home vector and, where known, little parallax."""
+    small_parallax = math.isnan(step.parallax_rad) or (
+        step.parallax_rad < math.radians(p.arrive_parallax_deg)
+    )
+    return step.length < p.arrive_length and small_parallax
+
+
+def drive_home(
+    robot: Robot,
+    goal: Fingerprint,
+    extract: Callable[[np.ndarray], Fingerprint],
+    params: HomingParams | None = None,
+) -> HomingResult:
+    """Drive ``robot`` by visual homing until the images say it reached ``goal``.
+
+    ``extract`` must use the goal's detector and settings. See the module docstring for the
+    step length, the arrival test and what happens on a bump.
+    """
+    p = params or HomingParams()
+    steps, distance, bumps, lost, scale = 0, 0.0, 0, 0, 1.0
+    previous_goal_dir: float | None = None
+    lengths: list[float] = []
+
+    def done(arrived: bool, reason: str, last: Fingerprint) -> HomingResult:
+        return HomingResult(arrived, steps, distance, reason, last, tuple(lengths))
+
+    def move(turn_rad: float, forward_m: float) -> bool:
+        nonlocal steps, distance
+        moved = robot.move(turn_rad, forward_m)
+        steps, distance = steps + 1, distance + abs(moved.moved_m)
+        return moved.bumped
+
+    while True:
+        current = extract(robot.capture().image)
+        try:
+            step = home_step(current, goal, p.step)
+        except HomingError:
+            lost += 1
+            if lost > p.max_lost or steps >= p.max_steps:
+                return done(False, "lost", current)
+            move(2.0 * math.pi / 3.0, p.sidestep_m)  # look from a little further on
+            previous_goal_dir = None
+            continue
+        lost = 0
+        lengths.append(step.length)
+        if _arrived(step, p):
+            return done(True, "arrived", current)
+        goal_dir = step.direction_rad - step.shift_rad  # home direction in the goal view's frame
+        if previous_goal_dir is not None:
+            turned = abs(float(_wrap(goal_dir - previous_goal_dir)))
+            reversed_ = turned > math.radians(p.reverse_deg)
+            scale = scale * p.scale_down if reversed_ else min(1.0, scale * p.scale_up)
+        previous_goal_dir = goal_dir
+        if scale < p.converged_scale:
+            return done(True, "converged", current)
+        if steps >= p.max_steps:
+            return done(False, "max_steps", current)
+        length_m = float(np.clip(p.gain_m * step.length, p.min_step_m, p.max_step_m))
+        if not move(step.direction_rad, max(length_m * scale, p.min_step_m)):
+            bumps = 0
+            continue
+        bumps += 1  # consecutive homing moves that ended in contact
+        if bumps > p.max_bumps:
+            return done(False, "blocked", current)
+        side = math.pi / 2 if bumps % 2 else -math.pi / 2
+        if move(side, p.sidestep_m):
+            move(math.pi, p.sidestep_m)  # boxed in on that side too: back off the other way
+        previous_goal_dir = None  # the sidestep is not a homing step: no overshoot test

@@ -1,0 +1,220 @@
+"""Visual homing on fingerprints: the pure step on synthetic bearings, and closed loops."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from homing.alv import HomingError
+from localizer.fingerprint import Fingerprint
+from localizer.visual_homing import (
+    HomingParams,
+    StepParams,
+    density_peak_rad,
+    drive_home,
+    grey_extractor,
+    home_step,
+)
+from robot.interface import Capture, MoveResult, Odometry
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.world import Pose2D
+from robot.worlds import make_world
+
+WIDTH_PX = 1024
+
+
+class LandmarkWorld:
+    """Point landmarks on the walls of a 6 x 6 m room, each with its own random descriptor."""
+
+    def __init__(self, seed: int, n: int = 60) -> None:
+        rng = np.random.default_rng(seed)
+        along, wall = rng.uniform(0.0, 6.0, n), rng.integers(0, 4, n)
+        self.xy = np.where(
+            (wall % 2 == 0)[:, None],
+            np.column_stack([along, np.where(wall == 0, 0.0, 6.0)]),
+            np.column_stack([np.where(wall == 1, 0.0, 6.0), along]),
+        )
+        self.descriptors = rng.uniform(0.0, 1.0, (n, 128)).astype(np.float32)
+
+    def fingerprint(self, pose: Pose2D, visible: np.ndarray | None = None) -> Fingerprint:
+        """The landmarks' bearings from ``pose`` in its robot frame, as a Fingerprint."""
+        d = self.xy - [pose.x_m, pose.y_m]
+        bearing = np.arctan2(d[:, 1], d[:, 0]) - pose.heading_rad
+        bearing = np.mod(bearing + np.pi, 2 * np.pi) - np.pi
+        x = np.mod(-bearing * WIDTH_PX / (2 * np.pi), WIDTH_PX)
+        keep = np.ones(len(d), bool) if visible is None else visible
+        xy = np.column_stack([x, np.full(len(x), 96.0)])
+        return Fingerprint("sift", WIDTH_PX, 192, xy[keep], bearing[keep], self.descriptors[keep])
+
+
+def _true_direction_rad(here: Pose2D, home: Pose2D) -> float:
+    return math.atan2(home.y_m - here.y_m, home.x_m - here.x_m) - here.heading_rad
+
+
+def _angle_error_deg(a_rad: float, b_rad: float) -> float:
+    return abs(math.degrees(math.remainder(a_rad - b_rad, 2 * math.pi)))
+
+
+def _cases(seed: int, count: int = 40, lo_m: float = 1.5, hi_m: float = 4.5):
+    """Random landmark worlds with a home and a current pose (random headings) in them."""
+    rng = np.random.default_rng(seed)
+    for k in range(count):
+        world = LandmarkWorld(k)
+        home = Pose2D(*rng.uniform(lo_m, hi_m, 2), rng.uniform(-np.pi, np.pi))
+        here = Pose2D(*rng.uniform(lo_m, hi_m, 2), rng.uniform(-np.pi, np.pi))
+        yield world, home, here
+
+
+def _rotation_rad(home: Pose2D, here: Pose2D) -> float:
+    return math.remainder(home.heading_rad - here.heading_rad, 2 * math.pi)
+
+
+@pytest.mark.parametrize("variant", ["thesis", "best"])
+def test_step_with_known_rotation_points_within_90_deg_of_home(variant):
+    # With every landmark seen in both views the ALV home vector is within 90 deg (Lambrinos).
+    for world, home, here in _cases(7):
+        step = home_step(
+            world.fingerprint(here),
+            world.fingerprint(home),
+            StepParams(variant, outlier_deg=180.0),
+            shift_rad=_rotation_rad(home, here),
+        )
+        assert _angle_error_deg(step.direction_rad, _true_direction_rad(here, home)) < 90.0
+
+
+def test_best_step_with_unknown_rotation_points_within_90_deg_of_home():
+    for world, home, here in _cases(8):
+        step = home_step(world.fingerprint(here), world.fingerprint(home))
+        assert _angle_error_deg(step.direction_rad, _true_direction_rad(here, home)) < 90.0
+
+
+def test_best_step_recovers_a_pure_rotation():
+    for world, home, here in _cases(11, count=10):
+        turned = Pose2D(home.x_m, home.y_m, here.heading_rad)
+        step = home_step(world.fingerprint(turned), world.fingerprint(home))
+        assert step.shift_rad == pytest.approx(_rotation_rad(home, turned), abs=1e-9)
+        assert step.length < 1e-9
+
+
+def test_thesis_step_with_unknown_rotation_mostly_points_home():
+    """The histogram compass sees only bearings: tested between near places."""
+    errors = [
+        _angle_error_deg(
+            home_step(
+                world.fingerprint(here), world.fingerprint(home), StepParams("thesis")
+            ).direction_rad,
+            _true_direction_rad(here, home),
+        )
+        for world, home, here in _cases(9, lo_m=2.5, hi_m=3.5)
+    ]
+    assert np.mean(np.array(errors) < 90.0) >= 0.9
+
+
+def test_best_step_ignores_features_seen_only_in_one_view():
+    world, home, here = next(_cases(10))
+    rng = np.random.default_rng(3)
+    seen_here, seen_home = rng.random(60) < 0.7, rng.random(60) < 0.7
+    step = home_step(world.fingerprint(here, seen_here), world.fingerprint(home, seen_home))
+    both = home_step(
+        world.fingerprint(here, seen_here & seen_home),
+        world.fingerprint(home, seen_here & seen_home),
+    )
+    assert step.home_xy == pytest.approx(both.home_xy)
+    assert 0 < step.n_used <= int((seen_here & seen_home).sum())
+
+
+def test_step_at_home_is_zero_with_no_parallax():
+    world = LandmarkWorld(1)
+    home = Pose2D(3.0, 3.0, 0.4)
+    step = home_step(world.fingerprint(Pose2D(3.0, 3.0, -2.0)), world.fingerprint(home))
+    assert step.length < 1e-9
+    assert step.parallax_rad < 1e-9
+
+
+def test_step_rejects_mismatched_detectors_and_empty_views():
+    world = LandmarkWorld(1)
+    fp = world.fingerprint(Pose2D(3.0, 3.0))
+    other = Fingerprint(
+        "mser", fp.image_width_px, fp.image_height_px, fp.keypoints_xy, fp.bearings_rad,
+        fp.descriptors,
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="'mser'"):
+        home_step(other, fp)
+    empty = Fingerprint.empty("sift", WIDTH_PX, 192)
+    for variant in ("thesis", "best"):
+        with pytest.raises(HomingError):
+            home_step(empty, fp, StepParams(variant))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="'random'"):
+        StepParams("random")  # type: ignore[arg-type]
+
+
+def test_density_peak_finds_the_mode_across_the_seam():
+    angles = np.r_[np.full(10, math.pi - 0.01), np.full(10, -math.pi + 0.02), [0.5, 1.0, -2.0]]
+    peak = density_peak_rad(angles)
+    assert abs(math.remainder(peak - math.pi, 2 * math.pi)) < math.radians(2)
+
+
+class PointRobot:
+    """A Robot in a LandmarkWorld: its captures are its pose, fingerprinted by ``extract``."""
+
+    def __init__(self, pose: Pose2D, wall_x_m: float = math.inf) -> None:
+        self.pose, self.wall_x_m = pose, wall_x_m
+
+    def capture(self) -> Capture:
+        return Capture(np.zeros((1, 1), np.uint8), 0.0, "point")
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        heading = self.pose.heading_rad + turn_rad
+        x = self.pose.x_m + forward_m * math.cos(heading)
+        bumped = x > self.wall_x_m
+        s = (
+            (self.wall_x_m - self.pose.x_m) / (x - self.pose.x_m) * forward_m
+            if bumped
+            else forward_m
+        )
+        self.pose = Pose2D(
+            self.pose.x_m + s * math.cos(heading), self.pose.y_m + s * math.sin(heading), heading
+        )
+        return MoveResult(turn_rad, s, bumped)
+
+    def odometry(self) -> Odometry:
+        return Odometry(self.pose.x_m, self.pose.y_m, self.pose.heading_rad)
+
+
+def test_drive_home_reaches_home_among_point_landmarks():
+    world = LandmarkWorld(5)
+    home = Pose2D(3.0, 3.0, 1.0)
+    robot = PointRobot(Pose2D(1.5, 4.2, -2.5))
+    result = drive_home(robot, world.fingerprint(home), lambda _: world.fingerprint(robot.pose))
+    assert result.arrived, result
+    assert math.hypot(robot.pose.x_m - home.x_m, robot.pose.y_m - home.y_m) < 0.25
+    assert result.steps <= 40 and result.distance_m < 5.0
+
+
+def test_drive_home_stops_blocked_behind_a_wall():
+    world = LandmarkWorld(5)
+    home = Pose2D(4.5, 3.0, 0.0)
+    robot = PointRobot(Pose2D(1.5, 3.0, 0.0), wall_x_m=2.5)
+    params = HomingParams(max_bumps=2)
+    result = drive_home(
+        robot, world.fingerprint(home), lambda _: world.fingerprint(robot.pose), params
+    )
+    assert (result.arrived, result.reason) == (False, "blocked")
+    assert robot.pose.x_m <= 2.5 + 1e-9
+
+
+def test_drive_home_in_the_rendered_square_room():
+    """Closed loop on 512 x 96 renders from 1.5 m away: ends within 0.3 m of the goal."""
+    world = make_world("square", 0)
+    camera = PanoramaCamera(512, 96)
+    goal = Pose2D(2.5, 1.8, 0.4)
+    extract = grey_extractor("sift")
+    goal_fp = extract(SimulatedRobot(world, goal, camera=camera, grey=True).capture().image)
+    robot = SimulatedRobot(world, Pose2D(1.2, 2.6, 2.0), camera=camera, grey=True)
+    result = drive_home(robot, goal_fp, extract)
+    end = robot.true_pose
+    assert math.hypot(end.x_m - goal.x_m, end.y_m - goal.y_m) < 0.3, result
+    assert result.arrived
