@@ -89,3 +89,14 @@ def agreement(rows: Iterable[dict[str, Any]], tolerance: float = 0.2) -> dict[st
         else:
             outside.append((*key, paper, row["success_rate"]))
     return {"compared": compared, "within": within, "outside": outside}
+
+
+def summarise_explanations(rows: Iterable[dict[str, Any]]) -> str:
+    """How many thesis-method rows differ from the paper, counted by cause (see explanations)."""
+    from homing.explanations import CAUSES, explain  # scipy only when asked for
+
+    explanations = explain(rows)
+    counts = {cause: sum(e.cause == cause for e in explanations) for cause in CAUSES}
+    lines = [f"rows that differ from the paper (success or iteration median): {len(explanations)}"]
+    lines += [f"  {n:4d}  {CAUSES[cause]}" for cause, n in counts.items() if n]
+    return "\n".join(lines)

@@ -20,7 +20,7 @@ from homing.experiments import (
     run_setting,
     settings,
 )
-from homing.report import agreement, format_tables
+from homing.report import agreement, format_tables, summarise_explanations
 
 
 def _tasks(
@@ -95,6 +95,12 @@ def run_simulation(
     help="Write trajectories and success curves (PNG).",
 )
 @click.option(
+    "--explain",
+    "explain_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write a markdown table: every thesis-method row that differs from the paper, and why.",
+)
+@click.option(
     "--jobs",
     type=click.IntRange(1),
     default=os.cpu_count() or 1,
@@ -109,6 +115,7 @@ def simulate(
     method: str,
     json_path: Path | None,
     plot_path: Path | None,
+    explain_path: Path | None,
     jobs: int,
 ) -> None:
     """Reproduce the thesis's ALV homing simulation (chapter 4, tables B.1-B.4).
@@ -126,6 +133,14 @@ def simulate(
             f"\nthesis method vs paper: {summary['within']}/{summary['compared']} rows within"
             " 20 percentage points of the printed success rate"
         )
+    if summary["compared"]:
+        click.echo(summarise_explanations(rows))
+    if explain_path:
+        from homing.explanations import explain, format_explanations
+
+        explanations = explain(rows)
+        explain_path.write_text(format_explanations(explanations))
+        click.echo(f"wrote {len(explanations)} explained rows to {explain_path}")
     if json_path:
         json_path.write_text(json.dumps(rows, indent=1))
         click.echo(f"wrote {len(rows)} rows to {json_path}")
