@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from toploc import __version__
+from toploc.commands.belief import belief
 from toploc.commands.dataset import dataset
 from toploc.commands.eval import eval_group
 from toploc.commands.map import map_group
@@ -23,3 +24,4 @@ main.add_command(dataset)
 main.add_command(map_group)
 main.add_command(eval_group)
 main.add_command(sim_group)
+main.add_command(belief)

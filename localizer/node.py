@@ -1,0 +1,234 @@
+"""The localizer on the Zenoh bus: :class:`LocalizerNode` serves a :class:`LocalizationService`,
+:class:`LocalizerClient` is what an application uses to talk to it.
+
+Keys under ``toploc/<robot_id>/``:
+
+- ``localizer/belief``: queryable (the latest belief) and publication (whenever it changes).
+- ``localizer/localize`` (queryable): optional ``{"active": bool}`` (default false); localize
+  now, reply the new belief. ``active`` allows the robot to move to disambiguate, so the reply
+  can take minutes: the client's timeout must allow for it.
+- ``localizer/reset`` (queryable): optional ``{"prior": {room: p}}``; uniform belief without.
+- liveliness token ``alive/localizer``.
+
+Belief JSON (``kind: "belief"``): ``{"rooms": {name: p}, "state": "localized" | "ambiguous" |
+"homing" | "lost", "entropy_bits": float, "best_place": {"place_id", "room", "inliers"} | null,
+"stamp": float}`` (``stamp`` in seconds since the epoch).
+
+Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
+indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
+``reset`` queries; concurrent ``localize`` queries are handled one after another. The service
+must therefore tolerate ``belief()``/``reset()`` being called while ``localize()`` runs. A
+service exception becomes an error reply with its message; the node stays up.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
+
+import zenoh
+
+from toploc import bus
+
+NODE_NAME = "localizer"
+_log = logging.getLogger(__name__)
+STATES = ("localized", "ambiguous", "homing", "lost")
+LOCALIZE_TIMEOUT_S = 300.0
+BELIEF_FIELDS: dict[str, bus.FieldType] = {
+    "rooms": dict,
+    "state": str,
+    "entropy_bits": float,
+    "best_place": (dict, type(None)),
+    "stamp": float,
+}
+BEST_PLACE_FIELDS: dict[str, bus.FieldType] = {"place_id": int, "room": str, "inliers": int}
+
+
+class LocalizationService(Protocol):
+    """What :class:`LocalizerNode` serves (the integrator's localization loop)."""
+
+    def belief(self) -> dict:
+        """The current belief as JSON-able dict (see the module docstring)."""
+        ...
+
+    def localize(self, active: bool) -> dict:
+        """Capture, match and update now (moving to disambiguate if ``active``); the belief."""
+        ...
+
+    def reset(self, prior: Mapping[str, float] | None) -> dict:
+        """Uniform belief over the rooms (``prior`` None) or the given prior; the belief."""
+        ...
+
+
+def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
+    """Validate a belief dict (names ``where`` and the bad field); return it without envelope."""
+    bus.check_fields(where, belief, BELIEF_FIELDS)
+    rooms = belief["rooms"]
+    for room, p in rooms.items():
+        if not bus.has_type(p, float) or not 0.0 <= p <= 1.0:
+            raise bus.BusMessageError(f"{where}: rooms[{room!r}] must be a probability, got {p!r}")
+    if belief["state"] not in STATES:
+        raise bus.BusMessageError(
+            f"{where}: state must be one of {STATES}, got {belief['state']!r}"
+        )
+    if belief["best_place"] is not None:
+        bus.check_fields(f"{where} best_place", belief["best_place"], BEST_PLACE_FIELDS)
+    return {name: value for name, value in belief.items() if name not in ("schema", "kind")}
+
+
+def check_prior(where: str, prior: Any) -> dict[str, float] | None:
+    """``None`` or a ``{room: weight}`` dict of finite non-negative numbers; else raise."""
+    if prior is None:
+        return None
+    if not isinstance(prior, dict) or not prior:
+        raise bus.BusMessageError(
+            f"{where}: prior must be a non-empty object {{room: p}}, got {prior!r}"
+        )
+    for room, p in prior.items():
+        if not bus.has_type(p, float) or p < 0:
+            raise bus.BusMessageError(f"{where}: prior[{room!r}] must be a number >= 0, got {p!r}")
+    return {room: float(p) for room, p in prior.items()}
+
+
+class LocalizerNode:
+    """Serve ``service`` on the bus under ``toploc/<robot_id>/``; ``close()`` (or ``with``)."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str, service: LocalizationService) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        self.service = service
+        self._publish_lock = threading.Lock()
+        self._last_published: dict[str, Any] | None = None
+        self._publisher = session.declare_publisher(self.key(bus.LOCALIZER_BELIEF))
+        self._entities: list[Any] = [
+            bus.serve(session, self.key(bus.LOCALIZER_BELIEF), self._on_belief),
+            bus.serve(session, self.key(bus.LOCALIZER_LOCALIZE), self._on_localize),
+            bus.serve(session, self.key(bus.LOCALIZER_RESET), self._on_reset),
+            self._publisher,
+            session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
+        ]
+
+    def key(self, suffix: str) -> str:
+        """``toploc/<robot_id>/<suffix>``."""
+        return bus.key(self.robot_id, suffix)
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open)."""
+        bus.undeclare_all(self._entities)
+
+    def __enter__(self) -> LocalizerNode:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def publish(self, belief: Mapping[str, Any]) -> bool:
+        """Publish ``belief`` on ``localizer/belief`` unless it equals the last one published.
+
+        The service calls this whenever its belief changes (e.g. during active localization);
+        the node also calls it with the result of ``localize`` and ``reset``. Returns whether it
+        was published. Raises BusMessageError for a belief that breaks the contract.
+        """
+        checked = check_belief(f"{self.key(bus.LOCALIZER_BELIEF)} (publish)", belief)
+        with self._publish_lock:
+            if checked == self._last_published:
+                return False
+            self._publisher.put(bus.encode("belief", checked))
+            self._last_published = checked
+        return True
+
+    def _belief_reply(self, belief: Mapping[str, Any], publish: bool) -> bus.Reply:
+        where = f"{self.key(bus.LOCALIZER_BELIEF)}: the service returned a bad belief"
+        checked = check_belief(where, belief)
+        if publish:
+            self.publish(checked)
+        return bus.Reply(bus.encode("belief", checked))
+
+    def _on_belief(self, _payload: bytes | None) -> bus.Reply:
+        return self._belief_reply(self.service.belief(), publish=False)
+
+    def _on_localize(self, payload: bytes | None) -> bus.Reply:
+        active = False
+        if payload:
+            request = bus.decode(self.key(bus.LOCALIZER_LOCALIZE), payload)
+            if "active" in request:
+                bus.check_fields(self.key(bus.LOCALIZER_LOCALIZE), request, {"active": bool})
+                active = request["active"]
+        return self._belief_reply(self.service.localize(active), publish=True)
+
+    def _on_reset(self, payload: bytes | None) -> bus.Reply:
+        prior = None
+        if payload:
+            where = self.key(bus.LOCALIZER_RESET)
+            prior = check_prior(where, bus.decode(where, payload).get("prior"))
+        return self._belief_reply(self.service.reset(prior), publish=True)
+
+
+class LocalizerClient:
+    """Query and follow a :class:`LocalizerNode` of robot ``robot_id`` over ``session``.
+
+    Every call raises :class:`~toploc.bus.BusTimeout` if no node answers in time,
+    :class:`~toploc.bus.BusReplyError` with the node's message if the service failed.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        timeout_s: float = bus.DEFAULT_TIMEOUT_S,
+        localize_timeout_s: float = LOCALIZE_TIMEOUT_S,
+    ) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        self.timeout_s = timeout_s
+        self.localize_timeout_s = localize_timeout_s
+        self._subscribers: list[Any] = []
+
+    def key(self, suffix: str) -> str:
+        """``toploc/<robot_id>/<suffix>``."""
+        return bus.key(self.robot_id, suffix)
+
+    def _query(self, suffix: str, payload: bytes | None, timeout_s: float) -> dict[str, Any]:
+        key_expr = self.key(suffix)
+        message = bus.request_json(self.session, key_expr, BELIEF_FIELDS, payload, timeout_s)
+        return check_belief(key_expr, message)
+
+    def belief(self) -> dict[str, Any]:
+        """The node's latest belief."""
+        return self._query(bus.LOCALIZER_BELIEF, None, self.timeout_s)
+
+    def localize(self, active: bool = False) -> dict[str, Any]:
+        """Localize now (moving to disambiguate if ``active``); waits up to
+        ``localize_timeout_s`` for the new belief."""
+        payload = bus.encode("localize", {"active": active})
+        return self._query(bus.LOCALIZER_LOCALIZE, payload, self.localize_timeout_s)
+
+    def reset(self, prior: Mapping[str, float] | None = None) -> dict[str, Any]:
+        """Reset to a uniform belief, or to ``prior`` ({room: p})."""
+        payload = bus.encode("reset", {} if prior is None else {"prior": dict(prior)})
+        return self._query(bus.LOCALIZER_RESET, payload, self.timeout_s)
+
+    def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
+        """Call ``callback(belief)`` for each published belief (on a zenoh thread); malformed
+        publications are skipped. Undeclare the returned subscriber, or :meth:`close`."""
+        key_expr = self.key(bus.LOCALIZER_BELIEF)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                message = bus.decode(key_expr, sample.payload.to_bytes(), BELIEF_FIELDS)
+                belief = check_belief(key_expr, message)
+            except bus.BusMessageError as error:
+                _log.warning("skipping a publication: %s", error)
+                return
+            callback(belief)
+
+        subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
+        self._subscribers.append(subscriber)
+        return subscriber
+
+    def close(self) -> None:
+        """Undeclare the subscribers made by :meth:`subscribe`."""
+        bus.undeclare_all(self._subscribers)
+        self._subscribers.clear()

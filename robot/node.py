@@ -1,0 +1,243 @@
+"""The robot on the Zenoh bus: :class:`RobotNode` serves a :class:`~robot.interface.Robot`,
+:class:`RemoteRobot` is a Robot that talks to such a node.
+
+Keys under ``toploc/<robot_id>/``:
+
+- ``camera/capture`` (queryable): capture now; reply PNG bytes with the JSON attachment
+  ``{schema, kind: "capture", capture_id, stamp, heading_deg, source}``; the same sample is
+  published on ``camera/panorama``. ``heading_deg`` is the odometry heading at capture time.
+- ``base/cmd`` (queryable): ``{turn_deg, forward_m}`` -> ``{turned_deg, moved_m, bumped, odom}``
+  once the move is done (``odom``: the ``base/odom`` fields after the move); a malformed command
+  gets an error reply and the robot does not move.
+- ``base/odom`` (publication after each move, and queryable): ``{x_m, y_m, heading_deg, stamp}``
+  in the odometry frame (REP-103).
+- ``base/bumpers`` (publication after each move): ``{bumped, stamp}``.
+- liveliness token ``alive/robot``.
+
+Calls into the robot are serialized with a lock (one serial line, one camera): an odometry
+query waits for a move in progress.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+import zenoh
+
+from robot.interface import Capture, MoveResult, Odometry, Robot
+from toploc import bus
+
+NODE_NAME = "robot"
+CMD_FIELDS: dict[str, bus.FieldType] = {"turn_deg": float, "forward_m": float}
+MOVE_FIELDS: dict[str, bus.FieldType] = {
+    "turned_deg": float,
+    "moved_m": float,
+    "bumped": bool,
+    "odom": dict,
+}
+ODOM_FIELDS: dict[str, bus.FieldType] = {
+    "x_m": float,
+    "y_m": float,
+    "heading_deg": float,
+    "stamp": float,
+}
+CAPTURE_FIELDS: dict[str, bus.FieldType] = {
+    "capture_id": int,
+    "stamp": float,
+    "heading_deg": float,
+    "source": str,
+}
+
+
+def odometry_fields(odometry: Odometry, stamp_s: float) -> dict[str, float]:
+    """The ``base/odom`` fields of ``odometry`` (heading in degrees, stamp in seconds)."""
+    return {
+        "x_m": odometry.x_m,
+        "y_m": odometry.y_m,
+        "heading_deg": math.degrees(odometry.heading_rad),
+        "stamp": stamp_s,
+    }
+
+
+def odometry_from_fields(message: dict[str, Any]) -> Odometry:
+    """Inverse of :func:`odometry_fields` (on a checked message)."""
+    return Odometry(message["x_m"], message["y_m"], math.radians(message["heading_deg"]))
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    """Lossless PNG bytes of a uint8 grey (H x W) or BGR (H x W x 3) image."""
+    if image.dtype != np.uint8 or image.ndim not in (2, 3):
+        raise ValueError(f"panorama must be uint8 HxW or HxWx3, got {image.dtype} {image.shape}")
+    ok, buffer = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"OpenCV could not encode a {image.shape} image as PNG")
+    return buffer.tobytes()
+
+
+def decode_png(key_expr: str, data: bytes) -> np.ndarray:
+    """The image in PNG ``data`` received on ``key_expr``; BusMessageError if it is not one."""
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        image = None
+    if image is None:
+        raise bus.BusMessageError(
+            f"{key_expr}: reply is not a decodable image ({len(data)} bytes, starts {data[:8]!r})"
+        )
+    return image
+
+
+class RobotNode:
+    """Serve ``robot`` on the bus under ``toploc/<robot_id>/``; ``close()`` (or ``with``)."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str, robot: Robot) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        self.robot = robot
+        self._lock = threading.Lock()
+        self._capture_ids = itertools.count(1)
+        k = self.key
+        self._panorama = session.declare_publisher(k(bus.CAMERA_PANORAMA))
+        self._odom = session.declare_publisher(k(bus.BASE_ODOM))
+        self._bumpers = session.declare_publisher(k(bus.BASE_BUMPERS))
+        self._entities: list[Any] = [
+            bus.serve(session, k(bus.CAMERA_CAPTURE), self._on_capture),
+            bus.serve(session, k(bus.BASE_CMD), self._on_cmd),
+            bus.serve(session, k(bus.BASE_ODOM), self._on_odom),
+            self._panorama,
+            self._odom,
+            self._bumpers,
+            session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
+        ]
+
+    def key(self, suffix: str) -> str:
+        """``toploc/<robot_id>/<suffix>``."""
+        return bus.key(self.robot_id, suffix)
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open)."""
+        bus.undeclare_all(self._entities)
+
+    def __enter__(self) -> RobotNode:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _on_capture(self, _payload: bytes | None) -> bus.Reply:
+        with self._lock:
+            capture = self.robot.capture()
+            heading_rad = self.robot.odometry().heading_rad
+        meta = {
+            "capture_id": next(self._capture_ids),
+            "stamp": capture.stamp_s,
+            "heading_deg": math.degrees(heading_rad),
+            "source": capture.source,
+        }
+        reply = bus.Reply(encode_png(capture.image), bus.encode("capture", meta))
+        self._panorama.put(reply.payload, attachment=reply.attachment)
+        return reply
+
+    def _on_cmd(self, payload: bytes | None) -> bus.Reply:
+        command = bus.decode(self.key(bus.BASE_CMD), payload, CMD_FIELDS)
+        with self._lock:
+            result = self.robot.move(math.radians(command["turn_deg"]), command["forward_m"])
+            odometry = self.robot.odometry()
+        odom = odometry_fields(odometry, time.time())
+        self._odom.put(bus.encode("odom", odom))
+        self._bumpers.put(bus.encode("bumpers", {"bumped": result.bumped, "stamp": odom["stamp"]}))
+        move = {
+            "turned_deg": math.degrees(result.turned_rad),
+            "moved_m": result.moved_m,
+            "bumped": result.bumped,
+            "odom": odom,
+        }
+        return bus.Reply(bus.encode("move", move))
+
+    def _on_odom(self, _payload: bytes | None) -> bus.Reply:
+        with self._lock:
+            odometry = self.robot.odometry()
+        return bus.Reply(bus.encode("odom", odometry_fields(odometry, time.time())))
+
+
+class RemoteRobot:
+    """A :class:`~robot.interface.Robot` whose calls go over the bus to a :class:`RobotNode`.
+
+    ``timeout_s`` bounds capture and odometry queries, ``move_timeout_s`` a move (it replies
+    when done). Every call raises :class:`~toploc.bus.BusTimeout` if the node does not answer,
+    :class:`~toploc.bus.BusReplyError` for an error reply, :class:`~toploc.bus.BusMessageError`
+    for a reply that breaks the contract (e.g. a corrupt image).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        timeout_s: float = bus.DEFAULT_TIMEOUT_S,
+        move_timeout_s: float = 60.0,
+    ) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        self.timeout_s = timeout_s
+        self.move_timeout_s = move_timeout_s
+        self.last_capture_meta: dict[str, Any] | None = None
+        self._odom_lock = threading.Lock()
+        self._last_odom: tuple[float, Odometry] | None = None  # (stamp_s, odometry)
+        self._odom_sub = session.declare_subscriber(
+            bus.key(robot_id, bus.BASE_ODOM), zenoh.handlers.Callback(self._on_odom)
+        )
+
+    def close(self) -> None:
+        """Stop listening to odometry (the session stays open)."""
+        bus.undeclare_all([self._odom_sub])
+
+    def _remember(self, odom: dict[str, Any]) -> Odometry:
+        """Keep the newest odometry by stamp (publications arrive on another thread)."""
+        odometry = odometry_from_fields(odom)
+        with self._odom_lock:
+            if self._last_odom is None or odom["stamp"] >= self._last_odom[0]:
+                self._last_odom = (odom["stamp"], odometry)
+        return odometry
+
+    def _on_odom(self, sample: zenoh.Sample) -> None:
+        try:
+            message = bus.decode(str(sample.key_expr), sample.payload.to_bytes(), ODOM_FIELDS)
+        except bus.BusMessageError:
+            return  # a bad publication is ignored; odometry() falls back to a query
+        self._remember(message)
+
+    def capture(self) -> Capture:
+        """Query ``camera/capture``; the attachment is kept in :attr:`last_capture_meta`."""
+        key_expr = bus.key(self.robot_id, bus.CAMERA_CAPTURE)
+        sample = bus.request(self.session, key_expr, None, self.timeout_s)
+        if sample.attachment is None:
+            raise bus.BusMessageError(f"{key_expr}: reply has no capture attachment")
+        meta = bus.decode(f"{key_expr} (attachment)", sample.attachment.to_bytes(), CAPTURE_FIELDS)
+        image = decode_png(key_expr, sample.payload.to_bytes())
+        self.last_capture_meta = meta
+        return Capture(image=image, stamp_s=float(meta["stamp"]), source=meta["source"])
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        """Query ``base/cmd`` and wait (up to ``move_timeout_s``) for the move to finish."""
+        key_expr = bus.key(self.robot_id, bus.BASE_CMD)
+        command = bus.encode("cmd", {"turn_deg": math.degrees(turn_rad), "forward_m": forward_m})
+        reply = bus.request_json(self.session, key_expr, MOVE_FIELDS, command, self.move_timeout_s)
+        bus.check_fields(f"{key_expr} (odom)", reply["odom"], ODOM_FIELDS)
+        self._remember(reply["odom"])
+        return MoveResult(math.radians(reply["turned_deg"]), reply["moved_m"], reply["bumped"])
+
+    def odometry(self) -> Odometry:
+        """The newest odometry seen (``base/odom`` publications and move replies), or a
+        ``base/odom`` query if none arrived yet."""
+        with self._odom_lock:
+            if self._last_odom is not None:
+                return self._last_odom[1]
+        key_expr = bus.key(self.robot_id, bus.BASE_ODOM)
+        message = bus.request_json(self.session, key_expr, ODOM_FIELDS, None, self.timeout_s)
+        return self._remember(message)

@@ -1,0 +1,360 @@
+"""The Zenoh bus contract: session configuration, key expressions, the JSON codec, replies.
+
+Every key lives under ``toploc/<robot_id>/`` (see :func:`key`). Every JSON message is an object
+``{"schema": SCHEMA_VERSION, "kind": <kind>, ...fields}``; an error reply (``Query.reply_err``)
+is ``{"schema": 1, "kind": "error", "error": "<message>"}``. Binary payloads (the PNG panorama)
+carry their metadata as a JSON attachment with the same envelope.
+
+Threading (eclipse-zenoh 1.x, measured with 1.10.2): a plain Python function passed to
+``declare_queryable``/``declare_subscriber`` is wrapped in ``zenoh.handlers.Callback(...,
+indirect=True)``, which runs it on a Python thread of its own per declared entity. So a slow
+queryable delays only later queries on that same key; other queryables keep answering.
+:func:`serve` declares with that handler explicitly.
+
+Querying (:func:`request`): ``Session.get`` returns at once with no reply when no queryable
+matches, and with a ``ReplyError`` whose payload is ``b"Timeout"`` when one matches but does not
+answer in time; both raise :class:`BusTimeout`. A callback that raises gets its query dropped (no
+reply), so :func:`serve` turns every exception into an error reply instead.
+
+Sessions: close every session (``with open_session(cfg) as session:``). With Python callbacks
+declared, an unclosed session keeps the interpreter from exiting (the callback threads are not
+daemons). Opening a peer session that connects to another peer can take up to
+``scouting/delay`` (500 ms by default): that wait is what lets a query made right after
+``open`` see the remote queryables (with the delay set to 0 it saw none, 0 of 10 tries).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import zenoh
+
+SCHEMA_VERSION = 1
+ROOT = "toploc"
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+DEFAULT_TIMEOUT_S = 5.0
+MODES = ("peer", "client", "router")
+
+# Key suffixes under toploc/<robot_id>/ (see the README's bus table).
+CAMERA_PANORAMA = "camera/panorama"
+CAMERA_CAPTURE = "camera/capture"
+BASE_CMD = "base/cmd"
+BASE_ODOM = "base/odom"
+BASE_BUMPERS = "base/bumpers"
+LOCALIZER_BELIEF = "localizer/belief"
+LOCALIZER_LOCALIZE = "localizer/localize"
+LOCALIZER_RESET = "localizer/reset"
+MAP_ROOMS = "map/rooms"
+MAP_PLACES = "map/places"
+MAP_EDGES = "map/edges"
+
+_FORBIDDEN_CHUNK_CHARS = set("/*$?#")
+_log = logging.getLogger(__name__)
+
+FieldType = type | tuple[type, ...]
+
+
+class BusError(Exception):
+    """Any failure talking over the bus."""
+
+
+class BusMessageError(BusError, ValueError):
+    """A message that does not follow the contract (names the key and what is wrong)."""
+
+
+class BusTimeout(BusError, TimeoutError):  # noqa: N818 (the name the contract uses)
+    """Nobody answered a query on a key in time."""
+
+
+class BusReplyError(BusError):
+    """The node answered a query with an error reply; ``message`` is its text."""
+
+    def __init__(self, key_expr: str, message: str) -> None:
+        super().__init__(f"{key_expr}: {message}")
+        self.key_expr = key_expr
+        self.message = message
+
+
+def check_robot_id(robot_id: str) -> str:
+    """Return ``robot_id`` if it is one non-empty key chunk (no ``/ * $ ? #``), else raise."""
+    if not robot_id or _FORBIDDEN_CHUNK_CHARS & set(robot_id) or robot_id != robot_id.strip():
+        raise ValueError(
+            f"robot id must be a non-empty key chunk without '/', '*', '$', '?', '#' or "
+            f"surrounding spaces, got {robot_id!r}"
+        )
+    return robot_id
+
+
+def key(robot_id: str, suffix: str) -> str:
+    """The key expression ``toploc/<robot_id>/<suffix>``, e.g. ``key("r1", LOCALIZER_BELIEF)``."""
+    if not suffix or suffix.startswith("/") or suffix.endswith("/"):
+        raise ValueError(f"key suffix must be relative like 'localizer/belief', got {suffix!r}")
+    return f"{ROOT}/{check_robot_id(robot_id)}/{suffix}"
+
+
+def alive_key(robot_id: str, node: str) -> str:
+    """The liveliness token key of a node: ``toploc/<robot_id>/alive/<node>``."""
+    return key(robot_id, f"alive/{check_robot_id(node)}")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """Where a session listens and connects. Defaults: a peer on 127.0.0.1:7447, no multicast.
+
+    ``listen``/``connect`` are Zenoh endpoints (``tcp/host:port``, ``udp/...``, ...). A client
+    application usually listens nowhere (``listen=()``) and connects to the service.
+    """
+
+    robot_id: str = "robot"
+    mode: str = "peer"
+    listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    connect: tuple[str, ...] = ()
+    scouting_multicast: bool = False
+
+    def __post_init__(self) -> None:
+        check_robot_id(self.robot_id)
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        for name in ("listen", "connect"):
+            endpoints = getattr(self, name)
+            if isinstance(endpoints, str):
+                raise ValueError(
+                    f"{name} must be a list of endpoints, not the string {endpoints!r}"
+                )
+            bad = [e for e in endpoints if not isinstance(e, str) or "/" not in e]
+            if bad:
+                raise ValueError(f"{name}: {bad[0]!r} is not an endpoint like {DEFAULT_ENDPOINT!r}")
+            object.__setattr__(self, name, tuple(endpoints))
+        if self.mode == "client" and not self.connect:
+            raise ValueError("a session in client mode needs at least one connect endpoint")
+
+    def to_zenoh(self) -> zenoh.Config:
+        """The ``zenoh.Config`` (built with ``insert_json5``)."""
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps(self.mode))
+        config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        config.insert_json5("scouting/multicast/enabled", json.dumps(self.scouting_multicast))
+        return config
+
+
+def open_session(cfg: BusConfig) -> zenoh.Session:
+    """Open a Zenoh session for ``cfg``; raises :class:`BusError` naming the endpoints on failure
+    (e.g. the listen port is already in use). Close it with ``session.close()`` or ``with``."""
+    try:
+        return zenoh.open(cfg.to_zenoh())
+    except zenoh.ZError as error:
+        raise BusError(
+            f"cannot open a Zenoh {cfg.mode} session (listen {list(cfg.listen)}, "
+            f"connect {list(cfg.connect)}): {error}"
+        ) from error
+
+
+# --- codec -----------------------------------------------------------------------------------
+
+
+def encode(kind: str, payload: Mapping[str, Any]) -> bytes:
+    """``{"schema": SCHEMA_VERSION, "kind": kind, **payload}`` as UTF-8 JSON (strict: no NaN)."""
+    clash = {"schema", "kind"} & set(payload)
+    if clash:
+        raise ValueError(f"{kind} message: field(s) {sorted(clash)} are reserved for the envelope")
+    try:
+        text = json.dumps({"schema": SCHEMA_VERSION, "kind": kind, **payload}, allow_nan=False)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{kind} message cannot be encoded as JSON: {error}") from error
+    return text.encode()
+
+
+def _type_name(expected: FieldType) -> str:
+    types = expected if isinstance(expected, tuple) else (expected,)
+    return " or ".join("null" if t is type(None) else t.__name__ for t in types)
+
+
+def has_type(value: Any, expected: FieldType) -> bool:
+    """JSON-aware isinstance: an int is a float, a bool is not a number, floats must be finite."""
+    types = expected if isinstance(expected, tuple) else (expected,)
+    for t in types:
+        if t is type(None) and value is None:
+            return True
+        if isinstance(value, bool) and t is not bool:
+            continue
+        if t is float and isinstance(value, int | float):
+            return math.isfinite(value)
+        if t is not type(None) and isinstance(value, t):
+            return True
+    return False
+
+
+def check_fields(where: str, message: Mapping[str, Any], required: Mapping[str, FieldType]) -> None:
+    """Raise :class:`BusMessageError` (prefixed ``where``) for a missing or ill-typed field."""
+    for name, expected in required.items():
+        if name not in message:
+            raise BusMessageError(f"{where}: missing field {name!r} ({_type_name(expected)})")
+        value = message[name]
+        if not has_type(value, expected):
+            raise BusMessageError(
+                f"{where}: field {name!r} must be {_type_name(expected)}, got {value!r}"
+            )
+
+
+def decode(
+    key_expr: str,
+    data: bytes | None,
+    required: Mapping[str, FieldType] | None = None,
+    kind: str | None = None,
+) -> dict[str, Any]:
+    """Parse a JSON message received on ``key_expr`` and check its envelope and fields.
+
+    ``required`` maps field name to type (``float`` accepts JSON integers; ``(dict, type(None))``
+    allows null). Raises :class:`BusMessageError` naming the key: not UTF-8 JSON, not an object,
+    wrong ``schema`` version, wrong ``kind`` (if given), missing or ill-typed field.
+    """
+    if data is None or len(data) == 0:
+        raise BusMessageError(f"{key_expr}: empty payload, expected a JSON object")
+    try:
+        message = json.loads(bytes(data).decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        preview = bytes(data[:40])
+        raise BusMessageError(
+            f"{key_expr}: payload is not JSON ({error}; starts {preview!r})"
+        ) from None
+    if not isinstance(message, dict):
+        raise BusMessageError(
+            f"{key_expr}: payload must be a JSON object, got {type(message).__name__}"
+        )
+    schema = message.get("schema")
+    if schema != SCHEMA_VERSION or isinstance(schema, bool):
+        raise BusMessageError(
+            f"{key_expr}: schema version {schema!r}, this toploc speaks {SCHEMA_VERSION}"
+        )
+    if kind is not None and message.get("kind") != kind:
+        raise BusMessageError(
+            f"{key_expr}: message kind {message.get('kind')!r}, expected {kind!r}"
+        )
+    check_fields(key_expr, message, required or {})
+    return message
+
+
+def error_payload(message: str) -> bytes:
+    """The body of an error reply: ``{"schema": 1, "kind": "error", "error": message}``."""
+    return encode("error", {"error": message})
+
+
+# --- queryables and queries ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reply:
+    """What a queryable handler answers: the payload and an optional attachment."""
+
+    payload: bytes
+    attachment: bytes | None = None
+
+
+Handler = Callable[[bytes | None], Reply]
+
+
+def serve(session: zenoh.Session, key_expr: str, handler: Handler) -> zenoh.Queryable:
+    """Declare a queryable on ``key_expr`` answering with ``handler(payload_bytes_or_None)``.
+
+    Any exception in the handler becomes an error reply carrying its message (BusMessageError
+    and ValueError as is, others prefixed with their type); the query is always dropped so the
+    querier never waits for its timeout. Runs on the queryable's own Python thread.
+    """
+
+    def callback(query: zenoh.Query) -> None:
+        with query:
+            payload = query.payload
+            try:
+                reply = handler(None if payload is None else payload.to_bytes())
+            except Exception as error:
+                text = str(error)
+                if not isinstance(error, ValueError):
+                    text = f"{type(error).__name__}: {text}"
+                _log.warning("%s: error reply: %s", key_expr, text)
+                try:
+                    query.reply_err(error_payload(text))
+                except zenoh.ZError:  # session closing
+                    _log.debug("%s: could not send the error reply", key_expr)
+                return
+            try:
+                query.reply(key_expr, reply.payload, attachment=reply.attachment)
+            except zenoh.ZError:  # session closing
+                _log.debug("%s: could not send the reply", key_expr)
+
+    return session.declare_queryable(key_expr, zenoh.handlers.Callback(callback, indirect=True))
+
+
+def connected(session: zenoh.Session) -> bool:
+    """Whether ``session`` has a transport to at least one other peer or router."""
+    info = session.info
+    return bool(info.peers_zid() or info.routers_zid())
+
+
+def _error_text(key_expr: str, data: bytes) -> str:
+    """The message of an error reply: ours (JSON ``error``) or Zenoh's own (plain text)."""
+    try:
+        return str(decode(key_expr, data, {"error": str})["error"])
+    except BusMessageError:
+        return data.decode(errors="replace")
+
+
+def request(
+    session: zenoh.Session,
+    key_expr: str,
+    payload: bytes | None = None,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+) -> zenoh.Sample:
+    """Query ``key_expr`` and return the first good reply's sample.
+
+    Raises :class:`BusTimeout` if nobody answers within ``timeout_s`` seconds (no queryable, a
+    crashed handler, or too slow), :class:`BusReplyError` with the node's message for an error
+    reply.
+    """
+    if not timeout_s > 0:
+        raise ValueError(f"timeout_s must be positive, got {timeout_s!r}")
+    try:
+        replies = list(session.get(key_expr, payload=payload, timeout=timeout_s))
+    except zenoh.ZError as error:
+        raise BusError(f"{key_expr}: query failed: {error}") from error
+    errors: list[str] = []
+    for reply in replies:
+        if reply.ok is not None:
+            return reply.ok
+        data = reply.err.payload.to_bytes() if reply.err is not None else b""
+        errors.append(_error_text(key_expr, data))
+    if not errors or errors == ["Timeout"]:
+        hint = (
+            "is the node running, with this robot id?"
+            if connected(session)
+            else "this session reaches no other Zenoh node: is anything listening at the "
+            "connect endpoints?"
+        )
+        raise BusTimeout(f"{key_expr}: no reply within {timeout_s:g} s ({hint})")
+    raise BusReplyError(key_expr, "; ".join(errors))
+
+
+def request_json(
+    session: zenoh.Session,
+    key_expr: str,
+    required: Mapping[str, FieldType],
+    payload: bytes | None = None,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+) -> dict[str, Any]:
+    """:func:`request` then :func:`decode` the reply with ``required`` fields."""
+    sample = request(session, key_expr, payload, timeout_s)
+    return decode(key_expr, sample.payload.to_bytes(), required)
+
+
+def undeclare_all(entities: Sequence[Any]) -> None:
+    """Undeclare queryables, publishers, subscribers and tokens; ignore a closed session."""
+    for entity in entities:
+        try:
+            entity.undeclare()
+        except zenoh.ZError:
+            _log.debug("undeclare after the session closed: %r", entity)

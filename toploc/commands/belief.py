@@ -1,0 +1,91 @@
+"""``toploc belief``: ask a running toploc service (over Zenoh) which room the robot is in.
+
+Opens a peer session that listens nowhere and connects to ``--connect`` (default
+``tcp/127.0.0.1:7447``), then queries ``toploc/<robot-id>/localizer/...``. ``--reset`` resets
+the belief first, ``--localize`` (or ``--active``) localizes now, then the belief is printed.
+Exit status 1 with ``Error: ...`` if no service answers or the service reports an error.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import click
+
+from toploc import bus
+
+
+def format_belief(belief: dict[str, Any]) -> str:
+    """Human-readable belief: state, entropy, best place, then rooms by probability."""
+    best = belief["best_place"]
+    best_text = (
+        "none"
+        if best is None
+        else f"place {best['place_id']} in {best['room']} ({best['inliers']} inliers)"
+    )
+    rooms = sorted(belief["rooms"].items(), key=lambda item: (-item[1], item[0]))
+    width = max((len(room) for room, _ in rooms), default=0)
+    lines = [
+        f"state: {belief['state']}   entropy: {belief['entropy_bits']:.3f} bits   "
+        f"stamp: {belief['stamp']:.3f}",
+        f"best place: {best_text}",
+        *(f"  {room:<{width}}  {p:6.3f}  {'#' * round(40 * p)}" for room, p in rooms),
+    ]
+    return "\n".join(lines)
+
+
+@click.command("belief")
+@click.option("--robot-id", default="robot", show_default=True, help="Robot id in the keys.")
+@click.option(
+    "--connect",
+    "endpoints",
+    multiple=True,
+    default=(bus.DEFAULT_ENDPOINT,),
+    show_default=True,
+    help="Zenoh endpoint of the service (repeatable).",
+)
+@click.option("--localize", is_flag=True, help="Localize now before printing the belief.")
+@click.option("--active", is_flag=True, help="Localize and allow moving to disambiguate.")
+@click.option("--reset", is_flag=True, help="Reset to a uniform belief first.")
+@click.option("--json", "as_json", is_flag=True, help="Print the belief as JSON.")
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=bus.DEFAULT_TIMEOUT_S,
+    show_default=True,
+    help="Seconds to wait for an answer (localize waits up to 300 s).",
+)
+def belief(
+    robot_id: str,
+    endpoints: tuple[str, ...],
+    localize: bool,
+    active: bool,
+    reset: bool,
+    as_json: bool,
+    timeout_s: float,
+) -> None:
+    """Print the belief of a running toploc service: probability per room, state, best place."""
+    from localizer.node import LOCALIZE_TIMEOUT_S, LocalizerClient
+
+    try:
+        cfg = bus.BusConfig(robot_id=robot_id, listen=(), connect=endpoints)
+    except ValueError as error:
+        raise click.BadParameter(str(error)) from error
+    try:
+        with bus.open_session(cfg) as session:
+            client = LocalizerClient(
+                session, robot_id, timeout_s, localize_timeout_s=max(timeout_s, LOCALIZE_TIMEOUT_S)
+            )
+            result = client.reset() if reset else None
+            if localize or active:
+                result = client.localize(active=active)
+            result = result if result is not None else client.belief()
+    except bus.BusError as error:
+        raise click.ClickException(str(error)) from error
+    click.echo(json.dumps(result, indent=2, sort_keys=True) if as_json else format_belief(result))
+
+
+if __name__ == "__main__":
+    belief()
