@@ -8,6 +8,7 @@ from toploc import __version__
 from toploc.commands.belief import belief
 from toploc.commands.dataset import dataset
 from toploc.commands.eval import eval_group
+from toploc.commands.localize import localize
 from toploc.commands.map import map_group
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
@@ -25,3 +26,4 @@ main.add_command(map_group)
 main.add_command(eval_group)
 main.add_command(sim_group)
 main.add_command(belief)
+main.add_command(localize)

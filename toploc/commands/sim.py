@@ -7,7 +7,12 @@ from __future__ import annotations
 
 import click
 
+from toploc.commands.sim_kidnap import kidnap
+
 
 @click.group(name="sim")
 def sim_group() -> None:
     """Run the simulated robot closed-loop in a rendered world."""
+
+
+sim_group.add_command(kidnap)

@@ -1,0 +1,174 @@
+"""Per-place evidence for a query panorama (Ramisa et al. 2006): matches, then verified inliers.
+
+For every candidate place of the map (all of them, or the shortlist of a
+:class:`~localizer.retrieval.PlaceIndex`), the query's descriptors are matched to the place's
+with the ratio test (:func:`localizer.matching.match_descriptors`), and places with at least
+``min_matches`` pairs are verified by an essential matrix on unit rays
+(:func:`localizer.verification.verify`). The inlier count is the evidence; the recovered yaw
+(``heading_query - heading_place``) is kept as a visual compass for homing.
+
+Stored places are assumed to share the query's cylinder geometry (same camera) unless
+``place_cylinder`` is given: the map table keeps keypoint rows and bearings but not image sizes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from localizer.fingerprint import Fingerprint
+from localizer.matching import DEFAULT_RATIO, match_descriptors
+from localizer.panorama import Cylinder
+from localizer.rays import cylinder_of, rays_from_fingerprint, rays_from_keypoints
+from localizer.retrieval import PlaceIndex
+from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, verify
+from mapdb.loading import FingerprintTable
+
+
+@dataclass(frozen=True)
+class EvidenceParams:
+    """How evidence is gathered.
+
+    ``ratio``: Lowe's ratio for descriptor matching. ``min_matches``: places with fewer matches
+    get 0 inliers without RANSAC. ``max_error_rad``: RANSAC inlier threshold (tangent Sampson
+    error, rad). ``shortlist``: how many places an index hands to verification. ``seed``:
+    RANSAC's seed. ``max_trials``: RANSAC's iteration cap per place.
+    """
+
+    ratio: float = DEFAULT_RATIO
+    min_matches: int = 10
+    max_error_rad: float = 0.01
+    shortlist: int = 10
+    seed: int = 0
+    max_trials: int = 1000
+
+    def __post_init__(self) -> None:
+        if not 0 < self.ratio <= 1:
+            raise ValueError(f"ratio must be in (0, 1], got {self.ratio!r}")
+        if self.min_matches < MIN_CORRESPONDENCES:
+            raise ValueError(
+                f"min_matches must be >= {MIN_CORRESPONDENCES}, got {self.min_matches!r}"
+            )
+        if self.shortlist < 1:
+            raise ValueError(f"shortlist must be >= 1, got {self.shortlist!r}")
+        self.verification()  # validates max_error_rad, seed and max_trials
+
+    def verification(self) -> VerificationParams:
+        """The matching :class:`VerificationParams`."""
+        return VerificationParams(
+            max_error_rad=self.max_error_rad,
+            min_correspondences=self.min_matches,
+            seed=self.seed,
+            min_trials=min(100, self.max_trials),
+            max_trials=self.max_trials,
+        )
+
+
+@dataclass(frozen=True)
+class PlaceEvidence:
+    """Evidence for one stored place.
+
+    ``matches``: ratio-test pairs; ``inliers``: pairs consistent with the essential matrix;
+    ``yaw_rad``: ``heading_query - heading_place`` (nan without geometry); ``inlier_pairs`` (k, 2)
+    int64 ``[query_keypoint, place_keypoint]``, the place's rows counted within that place.
+    """
+
+    place_id: int
+    room: str
+    matches: int
+    inliers: int
+    yaw_rad: float
+    inlier_pairs: np.ndarray
+
+
+@dataclass(frozen=True)
+class QueryEvidence:
+    """Evidence for every verified place, most inliers first (ties: more matches, lower id).
+
+    ``timing_ms``: ``"retrieval"`` (the index's shortlist; 0 for brute force) and
+    ``"verification"`` (descriptor matching plus RANSAC over the candidates), in milliseconds.
+    """
+
+    places: tuple[PlaceEvidence, ...]
+    timing_ms: dict[str, float]
+
+    @property
+    def best(self) -> PlaceEvidence | None:
+        """The place with the most inliers, or None if no place was evaluated."""
+        return self.places[0] if self.places else None
+
+
+def _check_inputs(query: Fingerprint, table: FingerprintTable) -> None:
+    if query.detector != table.detector:
+        raise ValueError(
+            f"query fingerprint is {query.detector!r} but the table holds {table.detector!r}"
+        )
+    dim = table.descriptors.shape[1] if table.descriptors.ndim == 2 else 0
+    if len(table.place_ids) and query.n and query.descriptors.shape[1] != dim:
+        raise ValueError(
+            f"query descriptors have {query.descriptors.shape[1]} values, the table's {dim}"
+        )
+
+
+def evaluate_place(
+    query: Fingerprint,
+    query_rays: np.ndarray,
+    table: FingerprintTable,
+    place_index: int,
+    params: EvidenceParams,
+    place_cylinder: Cylinder,
+) -> PlaceEvidence:
+    """Match and verify the query against the place at ``place_index`` of ``table``."""
+    start, stop = int(table.offsets[place_index]), int(table.offsets[place_index + 1])
+    pairs = match_descriptors(query.descriptors, table.descriptors[start:stop], params.ratio)
+    place_id, room = int(table.place_ids[place_index]), table.rooms[place_index]
+    if len(pairs) < params.min_matches:
+        empty = np.zeros((0, 2), dtype=np.int64)
+        return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty)
+    rows = pairs[:, 1] + start
+    place_rays = np.zeros((stop - start, 3))
+    place_rays[pairs[:, 1]] = rays_from_keypoints(
+        table.keypoints_xy[rows], table.bearings_rad[rows], place_cylinder
+    )
+    # Unmatched rows are never read; give them a valid unit ray for the input check.
+    place_rays[np.linalg.norm(place_rays, axis=1) == 0] = (1.0, 0.0, 0.0)
+    result = verify(query_rays, place_rays, pairs, params.verification())
+    return PlaceEvidence(
+        place_id, room, len(pairs), result.inliers, result.yaw_rad, result.inlier_pairs
+    )
+
+
+def place_evidence(
+    query: Fingerprint,
+    table: FingerprintTable,
+    params: EvidenceParams | None = None,
+    index: PlaceIndex | None = None,
+    place_cylinder: Cylinder | None = None,
+) -> QueryEvidence:
+    """Evidence of ``query`` for the places of ``table`` (one detector).
+
+    Brute force over every place when ``index`` is None; otherwise only the index's
+    ``params.shortlist`` best places are verified (the others are left out of the result).
+    An empty map gives no places; an empty query gives every candidate 0 matches.
+    ``place_cylinder`` defaults to the query's cylinder.
+    """
+    params = params or EvidenceParams()
+    _check_inputs(query, table)
+    t0 = time.perf_counter()
+    if index is None:
+        candidates = np.arange(len(table.place_ids))
+    else:
+        candidates = index.shortlist(query.descriptors, params.shortlist)
+    t1 = time.perf_counter()
+    query_rays = rays_from_fingerprint(query)
+    cylinder = cylinder_of(query) if place_cylinder is None else place_cylinder
+    evidence = [
+        evaluate_place(query, query_rays, table, int(i), params, cylinder) for i in candidates
+    ]
+    t2 = time.perf_counter()
+    evidence.sort(key=lambda e: (-e.inliers, -e.matches, e.place_id))
+    timing = {"retrieval": (t1 - t0) * 1e3 if index is not None else 0.0}
+    timing["verification"] = (t2 - t1) * 1e3
+    return QueryEvidence(tuple(evidence), timing)

@@ -1,0 +1,262 @@
+"""The localizer: a loaded map, the evidence of one panorama, and the belief over rooms.
+
+:class:`LoadedMap` is everything the localizer reads from the map database once at start-up
+(one detector's fingerprints stacked, the retrieval index, the places and the room graph).
+:class:`Localizer` turns a panorama into evidence (extraction, retrieval, verification) and
+keeps the Bayes filter over rooms. Both hold no open database handle.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from localizer.belief import (
+    BeliefFilter,
+    LikelihoodModel,
+    LocalizationState,
+    RoomBelief,
+    StateThresholds,
+    room_likelihood,
+)
+from localizer.evidence import EvidenceParams, QueryEvidence, place_evidence
+from localizer.features import extract_preset
+from localizer.fingerprint import Fingerprint
+from localizer.policy import MapPlace, PlaceSimilarity
+from localizer.retrieval import PlaceIndex
+from mapdb.database import MapDatabase
+from mapdb.loading import FingerprintTable, load_fingerprint_table, load_fingerprints
+
+# Below this many places brute force verifies every place anyway: an index would not save time.
+INDEX_MIN_PLACES = 32
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """How the localizer works; the defaults are documented in each part's class.
+
+    ``detector``: the extraction preset the map was built with (``sift``, ``mser``, ...).
+    ``use_index``: shortlist places with the retrieval index before verification (``None``:
+    when the map has at least ``INDEX_MIN_PLACES`` places). ``stay_probability``: per move,
+    the chance of staying in the same room (the prediction along the room graph).
+    """
+
+    detector: str = "sift"
+    evidence: EvidenceParams = field(default_factory=EvidenceParams)
+    likelihood: LikelihoodModel = field(default_factory=LikelihoodModel)
+    thresholds: StateThresholds = field(default_factory=StateThresholds)
+    stay_probability: float = 0.8
+    use_index: bool | None = None
+
+
+@dataclass(frozen=True)
+class LoadedMap:
+    """One detector's view of the map: fingerprints (stacked and per place), places, graph."""
+
+    path: Path
+    table: FingerprintTable
+    fingerprints: Mapping[int, Fingerprint]
+    places: tuple[MapPlace, ...]
+    rooms: tuple[str, ...]
+    edges: tuple[tuple[str, str], ...]
+    index: PlaceIndex | None
+
+    @classmethod
+    def from_database(
+        cls, path: Path | str, detector: str = "sift", use_index: bool | None = None
+    ) -> LoadedMap:
+        """Read the map at ``path`` (read-only). Raises ``ValueError`` if it has no place with
+        a ``detector`` fingerprint; database errors are :class:`mapdb.errors.MapDatabaseError`."""
+        path = Path(path)
+        with MapDatabase.open(path, create=False, readonly=True) as map_db:
+            table = load_fingerprint_table(map_db, detector)
+            stored = load_fingerprints(map_db, detector)
+            places = map_db.places()
+            rooms = tuple(room.name for room in map_db.rooms())
+            edges = tuple(map_db.edges())
+        if not len(table.place_ids):
+            raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
+        with_fingerprint = set(int(p) for p in table.place_ids)
+        map_places = tuple(
+            MapPlace(p.id, p.room, p.x_m, p.y_m) for p in places if p.id in with_fingerprint
+        )
+        if use_index is None:
+            use_index = len(table.place_ids) >= INDEX_MIN_PLACES
+        return cls(
+            path=path,
+            table=table,
+            fingerprints={s.place_id: s.fingerprint for s in stored},
+            places=map_places,
+            rooms=tuple(r for r in rooms if any(p.room == r for p in map_places)),
+            edges=edges,
+            index=PlaceIndex.build(table) if use_index else None,
+        )
+
+    @property
+    def image_size_px(self) -> tuple[int, int]:
+        """``(width, height)`` of the map's panoramas (of its first place)."""
+        first = self.fingerprints[self.places[0].place_id]
+        return first.image_width_px, first.image_height_px
+
+    def place(self, place_id: int) -> MapPlace:
+        """The place with id ``place_id``; ``KeyError`` naming it if it is not in the map."""
+        for place in self.places:
+            if place.place_id == place_id:
+                return place
+        raise KeyError(f"place {place_id} is not in the map {self.path}")
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One panorama seen by the localizer: its fingerprint, its evidence and the timings (ms)."""
+
+    fingerprint: Fingerprint
+    evidence: QueryEvidence
+    timing_ms: Mapping[str, float]
+
+
+def to_grey(image: np.ndarray) -> np.ndarray:
+    """A uint8 grey panorama from a grey or BGR one (``ValueError`` for other shapes)."""
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    raise ValueError(f"a panorama must be H x W or H x W x 3, got shape {image.shape}")
+
+
+class Localizer:
+    """Evidence and belief for panoramas against one loaded map.
+
+    Not thread-safe: a service serialises calls (see ``toploc.service``).
+    """
+
+    def __init__(self, loaded: LoadedMap, config: LocalizerConfig | None = None) -> None:
+        self.map = loaded
+        self.config = config or LocalizerConfig()
+        self.filter = BeliefFilter(loaded.rooms, loaded.edges, self.config.stay_probability)
+        self.latest: Observation | None = None
+        self._similarity: dict[tuple[int, int], int] = {}
+
+    def extract(self, image: np.ndarray) -> Fingerprint:
+        """The fingerprint of a panorama (grey or BGR uint8) with the map's detector."""
+        return extract_preset(to_grey(image), self.config.detector)
+
+    def observe(self, image: np.ndarray) -> Observation:
+        """Extract and gather evidence against the map; the belief is not changed."""
+        t0 = time.perf_counter()
+        fingerprint = self.extract(image)
+        extraction_ms = (time.perf_counter() - t0) * 1e3
+        return self.observe_fingerprint(fingerprint, extraction_ms)
+
+    def observe_fingerprint(
+        self, fingerprint: Fingerprint, extraction_ms: float = 0.0, exclude: int | None = None
+    ) -> Observation:
+        """Evidence for an already extracted fingerprint; ``exclude`` leaves one place out
+        (leave-one-out evaluation of the map's own places)."""
+        params = self.config.evidence
+        if exclude is not None:
+            params = replace(params, shortlist=params.shortlist + 1)
+        evidence = place_evidence(fingerprint, self.map.table, params, self.map.index)
+        if exclude is not None:
+            kept = tuple(e for e in evidence.places if e.place_id != exclude)
+            evidence = QueryEvidence(kept, evidence.timing_ms)
+        timing = {"extraction": extraction_ms, **evidence.timing_ms}
+        return Observation(fingerprint, evidence, timing)
+
+    def update(self, observation: Observation) -> RoomBelief:
+        """Fold an observation into the belief (Bayes update) and return the new belief."""
+        likelihood = room_likelihood(
+            observation.evidence.places, self.map.rooms, self.config.likelihood
+        )
+        self.filter.update(likelihood)
+        self.latest = observation
+        return self.belief()
+
+    def predict(self, stay_probability: float | None = None) -> None:
+        """The robot moved: spread the belief along the room graph."""
+        self.filter.predict(stay_probability)
+
+    def reset(self, prior: Mapping[str, float] | None = None) -> RoomBelief:
+        """Uniform belief (global localization), or ``prior`` (``{room: weight}``)."""
+        self.filter.reset(prior)
+        self.latest = None
+        return self.belief()
+
+    def belief(self, state: LocalizationState | None = None) -> RoomBelief:
+        """The current belief; ``state`` overrides the computed one (the service's homing)."""
+        evidence = None if self.latest is None else self.latest.evidence.places
+        belief = RoomBelief.from_probabilities(
+            self.map.rooms,
+            self.filter.probabilities,
+            self.config.thresholds,
+            evidence,
+            stamp_s=time.time(),
+        )
+        if state is None:
+            return belief
+        return RoomBelief(
+            belief.rooms,
+            belief.probabilities,
+            state,
+            belief.entropy_bits,
+            belief.best_place_id,
+            belief.best_place_inliers,
+            belief.stamp_s,
+        )
+
+    def localize_once(self, image: np.ndarray) -> tuple[RoomBelief, Observation]:
+        """One-shot: uniform prior, one update with ``image``."""
+        self.reset()
+        observation = self.observe(image)
+        return self.update(observation), observation
+
+    def similarity(
+        self, rows: tuple[int, ...], columns: tuple[int, ...] = ()
+    ) -> PlaceSimilarity:
+        """Verified inliers between stored views, for the separating policy.
+
+        The matrix covers ``rows`` and ``columns``; only the entries a policy reads are matched:
+        each row against itself (its keypoint count: a view matches itself completely) and
+        against every column. The others are 0. Each pair is matched once and cached.
+        """
+        ids = tuple(dict.fromkeys((*rows, *columns)))
+        index = {place_id: i for i, place_id in enumerate(ids)}
+        matrix = np.zeros((len(ids), len(ids)))
+        for a in rows:
+            for b in (a, *columns):
+                matrix[index[a], index[b]] = self._pair_inliers(a, b)
+        return PlaceSimilarity(ids, matrix)
+
+    def _pair_inliers(self, query_id: int, reference_id: int) -> int:
+        if query_id == reference_id:
+            return self.map.fingerprints[query_id].n
+        key = (query_id, reference_id)
+        if key not in self._similarity:
+            rows = np.flatnonzero(self.map.table.place_ids == reference_id)
+            evidence = place_evidence(
+                self.map.fingerprints[query_id],
+                _single_place(self.map.table, int(rows[0])),
+                self.config.evidence,
+            )
+            self._similarity[key] = evidence.best.inliers if evidence.best else 0
+        return self._similarity[key]
+
+
+def _single_place(table: FingerprintTable, i: int) -> FingerprintTable:
+    """The table restricted to its ``i``-th place."""
+    start, stop = int(table.offsets[i]), int(table.offsets[i + 1])
+    return FingerprintTable(
+        detector=table.detector,
+        place_ids=table.place_ids[i : i + 1],
+        rooms=(table.rooms[i],),
+        offsets=np.array([0, stop - start]),
+        keypoints_xy=table.keypoints_xy[start:stop],
+        bearings_rad=table.bearings_rad[start:stop],
+        descriptors=table.descriptors[start:stop],
+        alv_xy=table.alv_xy[i : i + 1],
+    )

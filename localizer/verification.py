@@ -1,0 +1,220 @@
+"""Geometric verification of matched keypoints: the essential matrix between two panoramas.
+
+Ramisa et al. (2006): the evidence that a query panorama was taken near a stored place is the
+number of matched keypoints consistent with one two-view geometry. Both panoramas are 360°, so
+the geometry is estimated from unit bearing rays (:mod:`localizer.rays`), not from pinhole image
+points: ``pycolmap.estimate_relative_pose(rays_place, rays_query, RANSACOptions)`` runs
+LO-RANSAC with the 5-point solver on rays directly and returns ``cam2_from_cam1``.
+
+Frames and conventions (REP-103 robot frames, x forward, y left, z up, CCW positive):
+
+- ``rotation`` is ``R_query_from_place``: it maps a direction in the place's robot frame into the
+  query's robot frame (pycolmap's ``cam2_from_cam1`` with the place as camera 1).
+- ``yaw_rad = heading_query - heading_place`` (wrapped to (-pi, pi]): the query's robot frame is
+  the place's frame turned by ``yaw_rad`` counter-clockwise, so a landmark seen at bearing ``b``
+  from the place appears at about ``b - yaw_rad`` in the query. (``homing.compass`` measures
+  ``current ≈ ref + delta``; with the place as reference, ``delta = -yaw_rad``.) This is the
+  visual compass for homing.
+- ``translation_dir`` is the unit translation of ``cam2_from_cam1`` (query frame): the direction
+  from the query to the place's centre is ``-translation_dir``. It is meaningless when the
+  panoramas were taken (almost) at the same spot.
+
+Inliers. pycolmap's own inlier mask also requires every triangulated point to lie in front of both
+cameras; with a small baseline (a query taken near the stored place, the case we most want to
+score high) the depth of nearly parallel rays has a random sign, so about half the true matches
+fail that test. We therefore rescore all pairs under the estimated model: a pair is an inlier when
+its tangent Sampson error (first-order angular distance to the epipolar great circles, radians) is
+below ``max_error_rad`` and the place ray, rotated into the query frame, is less than 90° from the
+query ray (rejecting the antipodal twins the epipolar constraint cannot tell apart on a sphere).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pycolmap
+
+from localizer.panorama import wrap_angle_rad
+
+MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
+
+
+@dataclass(frozen=True)
+class VerificationParams:
+    """RANSAC settings for :func:`verify`.
+
+    ``max_error_rad``: inlier threshold on the tangent Sampson error (radians; one column of a
+    1024-px panorama is 0.0061 rad). ``min_correspondences``: fewer pairs give 0 inliers without
+    running RANSAC (at least 5). ``seed``: RANSAC's random seed (deterministic results).
+    ``min_trials``/``max_trials``/``confidence``: pycolmap's RANSAC stopping rule.
+    """
+
+    max_error_rad: float = 0.01
+    min_correspondences: int = 8
+    seed: int = 0
+    min_trials: int = 100
+    max_trials: int = 2000
+    confidence: float = 0.999
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.max_error_rad) and self.max_error_rad > 0):
+            raise ValueError(f"max_error_rad must be positive, got {self.max_error_rad!r}")
+        if self.min_correspondences < MIN_CORRESPONDENCES:
+            raise ValueError(
+                f"min_correspondences must be >= {MIN_CORRESPONDENCES}, "
+                f"got {self.min_correspondences!r}"
+            )
+        if not 0 < self.min_trials <= self.max_trials:
+            raise ValueError(
+                f"need 0 < min_trials <= max_trials, got {self.min_trials}, {self.max_trials}"
+            )
+        if not 0 < self.confidence < 1:
+            raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0 (pycolmap treats -1 as random), got {self.seed}")
+
+    def ransac_options(self) -> pycolmap.RANSACOptions:
+        """The pycolmap options (single-threaded, seeded)."""
+        return pycolmap.RANSACOptions(
+            max_error=float(self.max_error_rad),
+            min_num_trials=int(self.min_trials),
+            max_num_trials=int(self.max_trials),
+            confidence=float(self.confidence),
+            random_seed=int(self.seed),
+            num_threads=1,
+        )
+
+
+@dataclass(frozen=True)
+class Verification:
+    """The outcome of :func:`verify` (see the module docstring for frames).
+
+    ``inliers`` is the evidence; ``inlier_pairs`` (k, 2) int64 ``[query_row, place_row]`` are the
+    consistent pairs. ``yaw_rad`` is nan, ``rotation`` (R_query_from_place) and
+    ``translation_dir`` None when no geometry was found.
+    """
+
+    inliers: int
+    inlier_pairs: np.ndarray
+    yaw_rad: float
+    rotation: np.ndarray | None
+    translation_dir: np.ndarray | None
+
+    @classmethod
+    def none(cls) -> Verification:
+        """No geometry: 0 inliers."""
+        return cls(0, np.zeros((0, 2), dtype=np.int64), float("nan"), None, None)
+
+
+def _check_rays(name: str, rays: np.ndarray) -> np.ndarray:
+    rays = np.asarray(rays, dtype=np.float64)
+    if rays.ndim != 2 or rays.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), got {rays.shape}")
+    norms = np.linalg.norm(rays, axis=1)
+    if not np.all(np.isfinite(norms)) or np.any(norms < 1e-12):
+        raise ValueError(f"{name} has non-finite or zero-length rays")
+    return rays / norms[:, None]
+
+
+def _check_pairs(pairs: np.ndarray, n_query: int, n_place: int) -> np.ndarray:
+    pairs = np.asarray(pairs)
+    if pairs.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or not np.issubdtype(pairs.dtype, np.integer):
+        raise ValueError(f"pairs must be (k, 2) integers, got {pairs.shape} {pairs.dtype}")
+    pairs = pairs.astype(np.int64)
+    if pairs.min() < 0 or pairs[:, 0].max() >= n_query or pairs[:, 1].max() >= n_place:
+        raise ValueError(
+            f"pairs index outside {n_query} query rays / {n_place} place rays "
+            f"(max {pairs[:, 0].max()}, {pairs[:, 1].max()})"
+        )
+    return pairs
+
+
+def yaw_from_rotation(R_query_from_place: np.ndarray) -> float:
+    """``heading_query - heading_place`` (rad, (-pi, pi]) from ``R_query_from_place``.
+
+    ``R_query_from_place = Rz(yaw)^T``, so ``yaw = atan2(R[0, 1], R[0, 0])``.
+    """
+    R = np.asarray(R_query_from_place, dtype=np.float64)
+    return float(wrap_angle_rad(np.arctan2(R[0, 1], R[0, 0])))
+
+
+def tangent_sampson_error_rad(
+    E: np.ndarray, rays_place: np.ndarray, rays_query: np.ndarray
+) -> np.ndarray:
+    """(n,) first-order angular distance (rad) of ray pairs from ``rays_query^T E rays_place = 0``.
+
+    The residual ``x2^T E x1`` divided by the norm of its gradient restricted to the tangent
+    planes of the two unit rays (a Sampson error on the spheres).
+    """
+    Ex1 = rays_place @ E.T  # rows: E x1
+    Etx2 = rays_query @ E  # rows: E^T x2
+    residual = np.einsum("ij,ij->i", rays_query, Ex1)
+    g2 = Ex1 - np.einsum("ij,ij->i", Ex1, rays_query)[:, None] * rays_query
+    g1 = Etx2 - np.einsum("ij,ij->i", Etx2, rays_place)[:, None] * rays_place
+    denom = np.sqrt(np.einsum("ij,ij->i", g1, g1) + np.einsum("ij,ij->i", g2, g2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.abs(residual) / denom
+    return np.where(denom > 1e-15, err, np.where(np.abs(residual) < 1e-15, 0.0, np.inf))
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def inlier_mask(
+    R_query_from_place: np.ndarray,
+    translation_dir: np.ndarray,
+    rays_place: np.ndarray,
+    rays_query: np.ndarray,
+    max_error_rad: float,
+) -> np.ndarray:
+    """Boolean (n,): the pairs consistent with the pose (see the module docstring)."""
+    E = _skew(translation_dir) @ R_query_from_place
+    err = tangent_sampson_error_rad(E, rays_place, rays_query)
+    same_side = np.einsum("ij,ij->i", rays_place @ R_query_from_place.T, rays_query) > 0.0
+    return (err <= max_error_rad) & same_side
+
+
+def verify(
+    query_rays: np.ndarray,
+    place_rays: np.ndarray,
+    pairs: np.ndarray,
+    params: VerificationParams | None = None,
+) -> Verification:
+    """Estimate the relative pose of query and place from matched rays; count the inliers.
+
+    ``query_rays`` (n, 3) and ``place_rays`` (m, 3) are unit rays in each panorama's robot frame;
+    ``pairs`` (k, 2) are ``[query_row, place_row]`` (as from
+    :func:`localizer.matching.match_descriptors`). Fewer than ``params.min_correspondences``
+    pairs, or a degenerate set on which RANSAC finds no model, give :meth:`Verification.none`.
+    Deterministic for a given ``params.seed``.
+    """
+    params = params or VerificationParams()
+    query_rays = _check_rays("query_rays", query_rays)
+    place_rays = _check_rays("place_rays", place_rays)
+    pairs = _check_pairs(pairs, len(query_rays), len(place_rays))
+    if len(pairs) < params.min_correspondences:
+        return Verification.none()
+    x_query = query_rays[pairs[:, 0]]
+    x_place = place_rays[pairs[:, 1]]
+    result = pycolmap.estimate_relative_pose(x_place, x_query, params.ransac_options())
+    if result is None:
+        return Verification.none()
+    pose = result["cam2_from_cam1"]
+    R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+    t = np.asarray(pose.translation, dtype=np.float64)
+    t_norm = float(np.linalg.norm(t))
+    if not (np.all(np.isfinite(R)) and np.isfinite(t_norm) and t_norm > 0):
+        return Verification.none()
+    t = t / t_norm
+    mask = inlier_mask(R, t, x_place, x_query, params.max_error_rad)
+    return Verification(
+        inliers=int(mask.sum()),
+        inlier_pairs=pairs[mask],
+        yaw_rad=yaw_from_rotation(R),
+        rotation=R,
+        translation_dir=t,
+    )

@@ -1,0 +1,156 @@
+"""Statistics of homing errors (eqs. 5.5-5.6) and home directions from bearings."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from homing.alv import HomingError, alv_from_bearings
+from homing.evaluation import (
+    FAILED_ERROR_DEG,
+    alv_home_directions_rad,
+    errors_by_distance,
+    homing_statistics,
+    matched_alv_direction_rad,
+    matched_rotation_rad,
+    pair_errors_deg,
+    true_home_direction_rad,
+    wedge_vote_direction_rad,
+)
+
+
+def _bearings(landmarks: np.ndarray, position: np.ndarray, heading_rad: float) -> np.ndarray:
+    d = landmarks - position
+    return np.arctan2(d[:, 1], d[:, 0]) - heading_rad
+
+
+def test_statistics_against_a_naive_double_loop() -> None:
+    rng = np.random.default_rng(3)
+    ids = [f"p{i}" for i in range(6)]
+    here, home, errors = [], [], []
+    for i in ids:
+        for j in ids:
+            if i != j:
+                here.append(i)
+                home.append(j)
+                errors.append(rng.uniform(0, 180))
+    stats = homing_statistics(np.array(errors), np.array(here), np.array(home))
+    n = len(ids)
+    naive_score = 1 - sum(errors) / (180 * n * (n - 1))  # eq. 5.6 as written
+    per_home = {h: np.mean([e for e, hh in zip(errors, home, strict=True) if hh == h]) for h in ids}
+    assert stats.n == n and stats.n_pairs == n * (n - 1) and stats.n_failed == 0
+    assert stats.score == pytest.approx(naive_score)
+    assert stats.mean_deg == pytest.approx(np.mean(errors))
+    assert stats.median_deg == pytest.approx(np.median(errors))
+    assert stats.std_deg == pytest.approx(np.std(errors, ddof=1))
+    assert stats.best_home == min(per_home, key=per_home.get)
+    assert stats.under_90 == pytest.approx(np.mean(np.array(errors) <= 90))
+    assert stats.under_10 == pytest.approx(np.mean(np.array(errors) <= 10))
+    record = stats.to_json(detector="sift", method="thesis")
+    expected = {"detector", "method", "n", "mean_deg", "median_deg", "std_deg", "score"}
+    assert expected | {"best_home", "under_90", "under_10"} <= set(record)
+
+
+def test_failed_pairs_are_charged_and_counted() -> None:
+    stats = homing_statistics(np.array([0.0, np.nan]), np.array(["a", "b"]), np.array(["b", "a"]))
+    assert stats.n_failed == 1
+    assert stats.mean_deg == pytest.approx(FAILED_ERROR_DEG / 2)
+    assert stats.best_home == "b"
+
+
+@pytest.mark.parametrize(
+    ("errors", "here", "home", "match"),
+    [
+        ([], [], [], "at least one"),
+        ([1.0, 2.0], ["a"], ["b", "a"], "2 errors but 1 current"),
+        ([190.0], ["a"], ["b"], r"\[0, 180\]"),
+        ([-1.0], ["a"], ["b"], r"\[0, 180\]"),
+    ],
+)
+def test_bad_statistics_input(errors, here, home, match) -> None:
+    with pytest.raises(HomingError, match=match):
+        homing_statistics(np.array(errors), np.array(here), np.array(home))
+
+
+def test_pair_error_uses_the_current_heading() -> None:
+    # Home is north (+y) of here; the robot faces west (heading 90 deg... CCW from x: north is
+    # 90 deg): facing north, the home is straight ahead (0 rad in the robot frame).
+    truth = true_home_direction_rad(np.array([0.0, 0.0]), np.array([0.0, 2.0]))
+    assert float(pair_errors_deg(0.0, math.pi / 2, truth)) == pytest.approx(0.0)
+    assert float(pair_errors_deg(math.pi / 2, math.pi / 2, truth)) == pytest.approx(90.0)
+
+
+landmark_sets = st.integers(0, 10_000).map(
+    lambda seed: np.random.default_rng(seed).uniform([-5, -5], [5, 5], size=(40, 2))
+)
+positions = st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)).map(np.array)
+headings = st.floats(-math.pi, math.pi)
+
+
+@settings(max_examples=60, deadline=None)
+@given(landmarks=landmark_sets, here=positions, home=positions, h1=headings, h2=headings)
+def test_home_directions_point_home_within_90_deg(landmarks, here, home, h1, h2) -> None:
+    """With fixed landmarks around both places, every method's home vector is within 90° of
+    the true direction (the ALV's convergence; Lambrinos et al. 2000), whatever the headings."""
+    if np.linalg.norm(home - here) < 0.2:
+        return
+    b_here, b_home = _bearings(landmarks, here, h1), _bearings(landmarks, home, h2)
+    truth = true_home_direction_rad(here, home)
+    rotation = h2 - h1
+    thesis = alv_home_directions_rad(
+        alv_from_bearings(b_here)[None], alv_from_bearings(b_home)[None], np.array([rotation])
+    )
+    matches = np.column_stack([np.arange(40), np.arange(40)])
+    matched = matched_alv_direction_rad(b_here, b_home, matches, rotation)
+    voted = wedge_vote_direction_rad(b_here, b_home, matches, rotation)
+    for direction in (float(thesis[0]), matched, voted):
+        assert float(pair_errors_deg(direction, h1, truth)) < 90.0
+    # With exact correspondences every wedge holds the true direction, so the vote (the centre
+    # of the arc common to all wedges) is close to it.
+    assert float(pair_errors_deg(voted, h1, truth)) < 10.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(landmarks=landmark_sets, here=positions, h1=headings, h2=headings)
+def test_matched_rotation_is_exact_without_parallax(landmarks, here, h1, h2) -> None:
+    b_here, b_home = _bearings(landmarks, here, h1), _bearings(landmarks, here, h2)
+    matches = np.column_stack([np.arange(40), np.arange(40)])
+    rotation = matched_rotation_rad(b_here, b_home, matches)
+    assert math.remainder(rotation - (h2 - h1), 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_vote_rejects_a_minority_of_mismatches() -> None:
+    rng = np.random.default_rng(0)
+    landmarks = rng.uniform(-5, 5, size=(60, 2))
+    here, home = np.array([-1.0, 0.0]), np.array([1.0, 0.5])
+    b_here, b_home = _bearings(landmarks, here, 0.0), _bearings(landmarks, home, 0.0)
+    matches = np.column_stack([np.arange(60), np.arange(60)])
+    matches[:15, 1] = rng.permutation(matches[:15, 1])  # a quarter mismatched
+    truth = true_home_direction_rad(here, home)
+    voted = wedge_vote_direction_rad(b_here, b_home, matches, 0.0)
+    assert float(pair_errors_deg(voted, 0.0, truth)) < 5.0
+
+
+def test_no_matches_or_zero_vector_give_nan() -> None:
+    none = np.zeros((0, 2), dtype=np.int64)
+    b = np.array([0.1, 1.0, 2.0])
+    assert math.isnan(matched_rotation_rad(b, b, none))
+    assert math.isnan(matched_alv_direction_rad(b, b, none, 0.0))
+    assert math.isnan(wedge_vote_direction_rad(b, b, none, 0.0))
+    same = alv_from_bearings(b)[None]
+    assert np.isnan(alv_home_directions_rad(same, same, np.array([0.0])))[0]
+
+
+def test_errors_by_distance_bins() -> None:
+    bins = errors_by_distance(np.array([0.2, 0.4, 1.1, 1.2]), np.array([10.0, 20.0, 30.0, np.nan]))
+    assert [(b.low_m, b.n) for b in bins] == [(0.0, 2), (1.0, 2)]
+    assert bins[0].mean_deg == pytest.approx(15.0)
+    assert bins[1].mean_deg == pytest.approx((30.0 + FAILED_ERROR_DEG) / 2)
+    with pytest.raises(HomingError, match="bin width"):
+        errors_by_distance(np.array([1.0]), np.array([1.0]), 0.0)
+    with pytest.raises(HomingError, match="equal 1-D"):
+        errors_by_distance(np.array([1.0, 2.0]), np.array([1.0]))

@@ -1,0 +1,71 @@
+"""Active disambiguation on the small rendered building map with the simulated robot."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localizer.active import ActiveParams, localize_actively
+from localizer.belief import LocalizationState
+from localizer.localizer import LoadedMap, Localizer
+from robot.interface import Capture, MoveResult, Odometry
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.worlds import make_world
+
+CAMERA = PanoramaCamera(512, 96)
+
+
+@pytest.fixture(scope="module")
+def localizer(building_map) -> Localizer:
+    return Localizer(LoadedMap.from_database(building_map[0]))
+
+
+@pytest.mark.parametrize("policy", ["separating", "most-likely"])
+def test_a_robot_kidnapped_into_a_look_alike_office_ends_localized_there(localizer, policy):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_b", seed=4, camera=CAMERA)
+    beliefs = []
+    result = localize_actively(localizer, robot, policy, on_belief=beliefs.append)
+    assert result.final.top[0] == "office_b"
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert beliefs[0] == result.first and beliefs[-1] == result.final
+    assert result.frames >= 1 + len(result.visits)
+    if result.first.state is LocalizationState.AMBIGUOUS:
+        assert result.visits, "an ambiguous first look must lead to a drive"
+        assert any(b.state is LocalizationState.HOMING for b in beliefs)
+    assert result.distance_m == pytest.approx(robot.distance_driven_m, abs=1e-6)
+
+
+class BlindRobot:
+    """Sees a blank wall wherever it is, and counts the moves it is asked for."""
+
+    def __init__(self) -> None:
+        self.moves = 0
+
+    def capture(self) -> Capture:
+        return Capture(np.full((96, 512), 200, np.uint8), 0.0, "blind")
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self.moves += 1
+        return MoveResult(turn_rad, forward_m, False)
+
+    def odometry(self) -> Odometry:
+        return Odometry(0.0, 0.0, 0.0)
+
+
+def test_a_robot_that_sees_nothing_is_lost_and_does_not_drive(localizer):
+    robot = BlindRobot()
+    result = localize_actively(localizer, robot, "most-likely")
+    assert result.final.state is LocalizationState.LOST
+    assert robot.moves == 0 and result.visits == ()
+
+
+def test_no_targets_allowed_means_no_drive(localizer):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
+    result = localize_actively(localizer, robot, "most-likely", ActiveParams(max_targets=0))
+    assert result.visits == () and robot.distance_driven_m == 0
+
+
+def test_an_unknown_policy_is_refused_by_name(localizer):
+    with pytest.raises(ValueError, match="unknown policy 'nearest'"):
+        localize_actively(localizer, BlindRobot(), "nearest")

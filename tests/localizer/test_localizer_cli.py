@@ -1,0 +1,76 @@
+"""``toploc localize``, ``toploc eval localize`` and ``toploc sim kidnap`` as a user runs them."""
+
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+
+from toploc.cli import main
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_localize_prints_the_belief_as_json(building_map):
+    db_path, dataset = building_map
+    image = dataset / "images" / "kitchen_003.png"
+    result = run("localize", image, "--db", db_path, "--json")
+    assert result.exit_code == 0, result.output
+    belief = json.loads(result.output)
+    assert belief["top"]["room"] == "kitchen"
+    assert belief["state"] in {"localized", "ambiguous"}
+    assert set(belief["timing_ms"]) == {"extraction", "retrieval", "verification"}
+
+
+def test_localize_names_a_corrupt_image(building_map, tmp_path):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    result = run("localize", bad, "--db", building_map[0])
+    assert result.exit_code == 1
+    assert "bad.png" in result.output
+
+
+def test_localize_names_a_missing_map(building_map, tmp_path):
+    image = building_map[1] / "images" / "kitchen_000.png"
+    result = run("localize", image, "--db", tmp_path / "nowhere.db")
+    assert result.exit_code == 1
+    assert "nowhere.db does not exist" in result.output
+
+
+def test_eval_localize_on_a_dataset_writes_the_issue_keys(building_map, tmp_path):
+    db_path, dataset = building_map
+    out = tmp_path / "score.json"
+    result = run("eval", "localize", dataset, "--db", db_path, "--json", out, "--no-progress")
+    assert result.exit_code == 0, result.output
+    score = json.loads(out.read_text())
+    assert score["n"] == sum(1 for _ in (dataset / "manifest.csv").open()) - 1
+    assert score["top1"] >= 0.9  # the map's own images, same condition
+    assert set(score["confusion"]) == set(score["per_room"])
+
+
+def test_eval_localize_leave_one_out_needs_no_dataset(building_map):
+    result = run("eval", "localize", "--db", building_map[0], "--leave-one-out", "--no-progress")
+    assert result.exit_code == 0, result.output
+    assert "top-1 room" in result.output
+
+
+def test_eval_localize_wants_a_dataset_or_leave_one_out(building_map):
+    result = run("eval", "localize", "--db", building_map[0])
+    assert result.exit_code == 2
+    assert "give a DATASET or --leave-one-out" in result.output
+
+
+def test_sim_kidnap_reports_each_trial_and_the_totals(building_map, tmp_path):
+    out = tmp_path / "kidnap.json"
+    result = run(
+        "sim", "kidnap", "--trials", "1", "--db", building_map[0], "--json", out, "--seed", "3"
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads(out.read_text())
+    (trial,) = report["trials"]
+    assert trial["true_room"] == "office_a"
+    assert {"final_belief", "steps", "distance_m", "frames", "success"} <= set(trial)
+    assert report["totals"]["trials"] == 1
+    assert report["totals"]["success_rate"] == float(trial["success"])

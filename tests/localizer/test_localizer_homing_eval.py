@@ -1,0 +1,175 @@
+"""Homing and alignment on a tiny rendered dataset, and the ``toploc eval`` commands.
+
+The bearing geometry of rendered landmarks (a landmark at a known position lands within a pixel
+of its predicted column) is tested in tests/robot/test_sim_render.py.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from localizer.features import ExtractionParams
+from localizer.homing_eval import (
+    COMPASSES,
+    EvaluationError,
+    evaluate_alignment,
+    evaluate_homing,
+    extract_fingerprints,
+    load_places,
+    same_room_pairs,
+)
+from localizer.panorama_io import PanoramaError
+from robot.dataset import render_dataset
+from robot.render import PanoramaCamera
+from toploc.cli import main
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Nine 512x96 panoramas of the square room, 1 m apart, with seeded random headings."""
+    out = tmp_path_factory.mktemp("square")
+    render_dataset(
+        out, "square", spacing_m=1.0, camera=PanoramaCamera(512, 96), heading_deg=None,
+        progress=False,
+    )  # fmt: skip
+    return out
+
+
+@pytest.fixture(scope="module")
+def fingerprints(dataset: Path) -> dict[str, list]:
+    places = load_places(dataset)
+    return {
+        detector: extract_fingerprints([p.path for p in places], ExtractionParams(detector))
+        for detector in ("sift", "mser")
+    }
+
+
+def test_same_room_pairs_never_cross_rooms() -> None:
+    pairs = same_room_pairs(["a", "b", "a", "a", "b"])
+    assert {tuple(p) for p in pairs.tolist()} == {
+        (0, 2), (0, 3), (2, 0), (2, 3), (3, 0), (3, 2), (1, 4), (4, 1),
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("detector", ["sift", "mser"])
+@pytest.mark.parametrize("method", ["thesis", "best", "alv-compass", "matched-vote"])
+def test_every_ordered_pair_is_evaluated(dataset, fingerprints, detector, method) -> None:
+    places = load_places(dataset)
+    run = evaluate_homing(places, fingerprints[detector], method)
+    n = len(places)
+    assert run.stats.n == n
+    assert run.stats.n_pairs == n * (n - 1) == len(run.errors_deg)
+    finite = run.errors_deg[np.isfinite(run.errors_deg)]
+    assert np.all((finite >= 0) & (finite <= 180))
+    assert run.stats.best_home in {p.image for p in places}
+
+
+def test_best_homes_without_headings_better_than_chance(dataset, fingerprints) -> None:
+    # Headings are random here: a home vector in the wrong frame would average ~90 deg.
+    run = evaluate_homing(load_places(dataset), fingerprints["sift"], "best")
+    assert run.stats.mean_deg < 60.0
+    assert run.stats.under_90 > 0.8
+
+
+def test_alignment_matched_compass_recovers_random_headings(dataset, fingerprints) -> None:
+    places = load_places(dataset)
+    run = evaluate_alignment(places, fingerprints["sift"], bin_width_m=1.0)
+    n = len(places)
+    assert set(run.errors_deg) == set(COMPASSES)
+    assert all(len(e) == n * (n - 1) for e in run.errors_deg.values())
+    assert sum(b.n for b in run.bins["matched"]) == n * (n - 1)
+    assert np.nanmedian(run.errors_deg["matched"]) < 20.0
+
+
+def _copy(dataset: Path, tmp_path: Path) -> Path:
+    target = tmp_path / "copy"
+    shutil.copytree(dataset, target)
+    return target
+
+
+def test_bad_input_names_the_file(dataset: Path, tmp_path: Path) -> None:
+    with pytest.raises(Exception, match="does not exist"):
+        load_places(tmp_path / "nowhere")
+    copy = _copy(dataset, tmp_path)
+    manifest = copy / "manifest.csv"
+    header = manifest.read_text().splitlines()[0]
+    manifest.write_text(header + "\n")
+    with pytest.raises(EvaluationError, match=r"manifest\.csv: no rows with a position"):
+        load_places(copy)
+    broken = copy / "images" / "broken.png"
+    broken.write_bytes(b"not an image at all")
+    with pytest.raises(PanoramaError, match=r"broken\.png"):
+        extract_fingerprints([broken], ExtractionParams("sift"))
+
+
+def test_missing_headings_and_unknown_method(dataset, fingerprints, tmp_path: Path) -> None:
+    copy = _copy(dataset, tmp_path)
+    manifest = copy / "manifest.csv"
+    lines = manifest.read_text().splitlines()
+    lines[1] = ",".join([*lines[1].split(",")[:4], ""])
+    manifest.write_text("\n".join(lines) + "\n")
+    places = load_places(copy)
+    with pytest.raises(EvaluationError, match="lack heading_deg"):
+        evaluate_homing(places, fingerprints["sift"], "thesis")
+    with pytest.raises(EvaluationError, match="unknown method"):
+        evaluate_homing(places, fingerprints["sift"], "magic")
+
+
+def test_cli_homing_writes_json_and_plot(dataset: Path, tmp_path: Path) -> None:
+    out_json, out_png = tmp_path / "h.json", tmp_path / "h.png"
+    result = CliRunner().invoke(
+        main,
+        ["eval", "homing", str(dataset), "--detector", "mser", "--rows", "lower", "--workers",
+         "0", "--no-progress", "--json", str(out_json), "--plot", str(out_png)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "score" in result.output and "best home" in result.output
+    record = json.loads(out_json.read_text())
+    keys = ("detector", "method", "n", "mean_deg", "median_deg", "std_deg", "score")
+    assert set(keys) | {"best_home", "under_90", "under_10"} <= set(record)
+    assert record["detector"] == "mser" and record["n"] == 9
+    assert out_png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_align_prints_bins(dataset: Path, tmp_path: Path) -> None:
+    out_png = tmp_path / "a.png"
+    result = CliRunner().invoke(
+        main,
+        ["eval", "align", str(dataset), "--workers", "0", "--no-progress", "--bin-m", "1",
+         "--plot", str(out_png)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "histogram" in result.output and "matched" in result.output
+    assert out_png.is_file()
+
+
+@pytest.mark.parametrize("command", ["homing", "align"])
+def test_cli_bad_input_is_one_line_error(dataset: Path, tmp_path: Path, command: str) -> None:
+    runner = CliRunner()
+    missing = runner.invoke(main, ["eval", command, str(tmp_path / "nowhere"), "--no-progress"])
+    assert missing.exit_code == 1
+    assert missing.output.startswith("Error: ") and "nowhere" in missing.output
+    copy = _copy(dataset, tmp_path)
+    (copy / "images" / "square_000.png").write_bytes(b"garbage")
+    broken = runner.invoke(main, ["eval", command, str(copy), "--workers", "0", "--no-progress"])
+    assert broken.exit_code == 1
+    assert broken.output.startswith("Error: ") and "square_000.png" in broken.output
+    assert len(broken.output.strip().splitlines()) == 1
+
+
+def test_pairs_without_matches_fall_back_to_the_compass_alv(dataset, fingerprints) -> None:
+    # Identical descriptors never pass the ratio test: no pair has a match.
+    from dataclasses import replace
+
+    blind = [replace(f, descriptors=np.zeros_like(f.descriptors)) for f in fingerprints["sift"]]
+    places = load_places(dataset)
+    best = evaluate_homing(places, blind, "best")
+    compass = evaluate_homing(places, blind, "alv-compass")
+    assert best.stats.n_failed == 0
+    np.testing.assert_allclose(best.errors_deg, compass.errors_deg)

@@ -1,0 +1,97 @@
+"""The localizer on a small rendered map: load, observe, update, one-shot belief."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from localizer.belief import LocalizationState
+from localizer.localizer import LoadedMap, Localizer, to_grey
+from mapdb.database import MapDatabase
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.world import Pose2D
+from robot.worlds import make_world
+
+CAMERA = PanoramaCamera(512, 96)
+
+
+@pytest.fixture(scope="module")
+def localizer(building_map) -> Localizer:
+    db_path, _ = building_map
+    return Localizer(LoadedMap.from_database(db_path))
+
+
+def capture_in(room: str, x_m: float, y_m: float, heading_deg: float) -> object:
+    world = make_world("building")
+    pose = world.building_pose(room, Pose2D(x_m, y_m, math.radians(heading_deg)))
+    return SimulatedRobot(world, pose, camera=CAMERA, seed=5).capture().image
+
+
+def test_the_loaded_map_has_every_room_with_places_and_the_graph(localizer: Localizer):
+    assert set(localizer.map.rooms) == {
+        "corridor", "kitchen", "office_a", "office_b", "seminar", "storage"
+    }  # fmt: skip
+    assert ("corridor", "kitchen") in localizer.map.edges
+    assert localizer.map.image_size_px == (512, 96)
+
+
+def test_a_kitchen_panorama_between_places_is_placed_in_the_kitchen(localizer: Localizer):
+    belief, observation = localizer.localize_once(capture_in("kitchen", 2.0, 3.0, 40.0))
+    assert belief.top[0] == "kitchen"
+    assert observation.evidence.best is not None
+    assert observation.evidence.best.room == "kitchen"
+    assert set(observation.timing_ms) == {"extraction", "retrieval", "verification"}
+
+
+def test_a_repeated_view_sharpens_the_belief(localizer: Localizer):
+    image = capture_in("seminar", 3.1, 3.3, -70.0)
+    first, _ = localizer.localize_once(image)
+    again = localizer.update(localizer.observe(image))
+    assert again.top[0] == first.top[0] == "seminar"
+    assert again.top[1] >= first.top[1]
+
+
+def test_reset_with_a_prior_and_prediction_along_the_graph(localizer: Localizer):
+    belief = localizer.reset({"kitchen": 1.0})
+    assert belief.as_dict()["kitchen"] == 1.0
+    localizer.predict()
+    spread = localizer.belief().as_dict()
+    assert spread["corridor"] > 0  # kitchen's only neighbour
+    assert spread["seminar"] == 0
+
+
+def test_leaving_a_place_out_removes_it_from_the_evidence(localizer: Localizer):
+    place = localizer.map.places[0]
+    fingerprint = localizer.map.fingerprints[place.place_id]
+    kept = localizer.observe_fingerprint(fingerprint, exclude=place.place_id)
+    assert all(e.place_id != place.place_id for e in kept.evidence.places)
+    full = localizer.observe_fingerprint(fingerprint)
+    assert full.evidence.best.place_id == place.place_id
+
+
+def test_a_blank_panorama_leaves_the_localizer_lost(localizer: Localizer):
+    blank = capture_in("kitchen", 2.0, 3.0, 0.0) * 0 + 128
+    belief, _ = localizer.localize_once(blank)
+    assert belief.state is LocalizationState.LOST
+    assert max(belief.probabilities) == pytest.approx(1 / len(belief.rooms))
+
+
+def test_a_map_without_the_detector_is_refused_by_name(building_map):
+    db_path, _ = building_map
+    with pytest.raises(ValueError, match="no place with a 'mser' fingerprint"):
+        LoadedMap.from_database(db_path, detector="mser")
+
+
+def test_an_empty_map_is_refused(tmp_path):
+    MapDatabase.open(tmp_path / "empty.db").close()
+    with pytest.raises(ValueError, match=r"empty\.db has no place"):
+        LoadedMap.from_database(tmp_path / "empty.db")
+
+
+def test_images_of_other_shapes_are_refused():
+    import numpy as np
+
+    with pytest.raises(ValueError, match=r"\(4, 4, 2\)"):
+        to_grey(np.zeros((4, 4, 2), np.uint8))

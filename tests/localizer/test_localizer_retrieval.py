@@ -1,0 +1,109 @@
+"""The FLANN place index: votes, shortlists, and agreement with brute-force evidence."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from localizer.evidence import EvidenceParams, place_evidence
+from localizer.features import extract_preset
+from localizer.fingerprint import Fingerprint
+from localizer.retrieval import IndexParams, PlaceIndex
+from mapdb import FingerprintTable, MapDatabase, NewPlace, load_fingerprint_table
+from robot.conditions import get_condition
+from robot.render import PanoramaCamera, render_panorama
+from robot.scene import build_scene
+from robot.world import Pose2D
+from robot.worlds import make_world
+
+
+def random_table(rng: np.random.Generator, counts: list[int], dim: int = 128) -> FingerprintTable:
+    """A table of random unit-ish descriptors, ``counts[i]`` rows for place ``i``."""
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    n = int(offsets[-1])
+    return FingerprintTable(
+        detector="sift",
+        place_ids=np.arange(10, 10 + len(counts), dtype=np.int64),
+        rooms=tuple(f"room{i % 3}" for i in range(len(counts))),
+        offsets=offsets,
+        keypoints_xy=np.zeros((n, 2), np.float32),
+        bearings_rad=np.zeros(n),
+        descriptors=rng.random((n, dim), dtype=np.float32),
+        alv_xy=np.zeros((len(counts), 2)),
+    )
+
+
+def test_planted_place_is_shortlisted_first() -> None:
+    rng = np.random.default_rng(0)
+    table = random_table(rng, [80, 200, 120, 60, 150, 90])
+    index = PlaceIndex.build(table)
+    for place in range(6):
+        rows = table.descriptors[table.offsets[place] : table.offsets[place + 1]]
+        query = rows[::2] + rng.normal(0, 0.01, rows[::2].shape).astype(np.float32)
+        assert index.shortlist(query, 3)[0] == place
+
+
+def test_shortlist_edge_cases() -> None:
+    rng = np.random.default_rng(1)
+    table = random_table(rng, [30, 40])
+    index = PlaceIndex.build(table)
+    np.testing.assert_array_equal(
+        np.sort(index.shortlist(np.zeros((0, 128), np.float32), 5)), [0, 1]
+    )
+    with pytest.raises(ValueError, match=r"must be \(n, 128\)"):
+        index.shortlist(np.zeros((3, 64), np.float32), 1)
+    with pytest.raises(ValueError, match="k must be >= 1"):
+        index.shortlist(table.descriptors[:3], 0)
+    empty = PlaceIndex.build(random_table(rng, []))
+    assert empty.n_places == 0 and len(empty.shortlist(table.descriptors[:3], 4)) == 0
+    with pytest.raises(ValueError, match="max_distance_ratio"):
+        IndexParams(max_distance_ratio=0.5)
+
+
+# Rendered: the corridor world (one long room, many places that look alike) at several spots.
+CAMERA = PanoramaCamera(width_px=1024, height_px=192)
+MAP_X_M = (2.0, 5.0, 8.0, 11.0, 14.0, 17.0, 20.0)
+QUERIES = ((5.3, 1.2, 40.0), (13.7, 0.9, -100.0), (19.6, 1.1, 170.0))
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory: pytest.TempPathFactory) -> tuple[FingerprintTable, list]:
+    world = make_world("corridor", 0)
+    scene = build_scene(world)
+
+    def fingerprint(x: float, y: float, heading_deg: float, condition: str) -> Fingerprint:
+        pose = world.building_pose("corridor", Pose2D(x, y, math.radians(heading_deg)))
+        image = render_panorama(
+            scene, pose, CAMERA, get_condition(condition), seed=int(x * 10), grey=True
+        )
+        return extract_preset(image, "sift")
+
+    path: Path = tmp_path_factory.mktemp("retrieval") / "map.db"
+    with MapDatabase.open(path) as map_db:
+        for i, x in enumerate(MAP_X_M):
+            heading = 37.0 * i
+            place = NewPlace("corridor", f"{i:064x}", f"corridor/{i}", x, 1.1, heading)
+            map_db.add_place(place, [fingerprint(x, 1.1, heading, "default")])
+        table = load_fingerprint_table(map_db, "sift")
+    return table, [fingerprint(*q, "dim_noisy") for q in QUERIES]
+
+
+def test_index_shortlist_contains_brute_force_winner(corridor) -> None:
+    table, queries = corridor
+    index = PlaceIndex.build(table)
+    params = EvidenceParams(shortlist=3)
+    for (x, _, _), query in zip(QUERIES, queries, strict=True):
+        brute = place_evidence(query, table, params)
+        assert brute.best is not None
+        winner = int(np.flatnonzero(table.place_ids == brute.best.place_id)[0])
+        assert abs(MAP_X_M[winner] - x) < 3.5  # the nearest place or its neighbour
+        shortlist = index.shortlist(query.descriptors, params.shortlist)
+        assert winner in shortlist
+        indexed = place_evidence(query, table, params, index)
+        assert len(indexed.places) == 3
+        assert indexed.best is not None and indexed.best.place_id == brute.best.place_id
+        assert indexed.best.inliers == brute.best.inliers  # same seed, same pairs
+        assert indexed.timing_ms["retrieval"] > 0

@@ -1,0 +1,163 @@
+"""Rays from fingerprints and essential-matrix verification on synthetic rays with known R, t."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from localizer.fingerprint import Fingerprint
+from localizer.panorama import Cylinder, wrap_angle_rad
+from localizer.rays import rays_from_angles, rays_from_fingerprint
+from localizer.verification import (
+    Verification,
+    VerificationParams,
+    tangent_sampson_error_rad,
+    verify,
+    yaw_from_rotation,
+)
+
+
+def rz(yaw_rad: float) -> np.ndarray:
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def two_views(
+    rng: np.random.Generator,
+    n: int,
+    yaw_rad: float,
+    t_query_in_place_m: np.ndarray,
+    n_outliers: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays of ``n`` room points seen from the place (origin) and from the query, whose frame is
+    the place's turned by ``yaw_rad`` and moved to ``t_query_in_place_m``; the first
+    ``n_outliers`` query rays are replaced by random directions. Returns rays and the pairs."""
+    points = np.column_stack(
+        [rng.uniform(-4, 4, n), rng.uniform(-4, 4, n), rng.uniform(-1.0, 1.5, n)]
+    )
+    points[np.linalg.norm(points[:, :2], axis=1) < 0.8, :2] *= 3.0  # keep points off the camera
+    place = points / np.linalg.norm(points, axis=1, keepdims=True)
+    in_query = (points - t_query_in_place_m) @ rz(yaw_rad)  # R_place_from_query^T (p - t)
+    query = in_query / np.linalg.norm(in_query, axis=1, keepdims=True)
+    random = rng.normal(size=(n_outliers, 3))
+    query[:n_outliers] = random / np.linalg.norm(random, axis=1, keepdims=True)
+    pairs = np.column_stack([np.arange(n), np.arange(n)])
+    return query, place, pairs
+
+
+def test_exact_inliers_outliers_rejected_yaw_recovered() -> None:
+    rng = np.random.default_rng(3)
+    query, place, pairs = two_views(rng, 200, 0.6, np.array([0.7, -0.4, 0.0]), n_outliers=60)
+    result = verify(query, place, pairs, VerificationParams(seed=1))
+    kept = set(result.inlier_pairs[:, 0].tolist())
+    assert set(range(60, 200)) <= kept  # every true pair
+    assert len(kept & set(range(60))) <= 3  # random directions: at most a chance few
+    assert result.inliers == len(result.inlier_pairs)
+    assert abs(wrap_angle_rad(result.yaw_rad - 0.6)) < 1e-6
+    np.testing.assert_allclose(result.rotation, rz(0.6).T, atol=1e-6)
+    # translation_dir is the query-frame direction of cam2_from_cam1: -R^T t_query_in_place.
+    expected_t = -(rz(0.6).T @ np.array([0.7, -0.4, 0.0]))
+    np.testing.assert_allclose(
+        result.translation_dir, expected_t / np.linalg.norm(expected_t), atol=1e-6
+    )
+
+
+def test_pure_rotation_keeps_every_true_pair() -> None:
+    """Query at the place itself: pycolmap's cheirality would drop about half; we keep all."""
+    rng = np.random.default_rng(5)
+    query, place, pairs = two_views(rng, 150, -2.0, np.zeros(3))
+    noisy = query + rng.normal(0.0, 0.001, query.shape)
+    result = verify(noisy, place, pairs, VerificationParams(seed=2))
+    assert result.inliers >= 145
+    assert abs(wrap_angle_rad(result.yaw_rad + 2.0)) < np.deg2rad(0.5)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    yaw_rad=st.floats(-np.pi + 1e-3, np.pi),
+    tx=st.floats(-1.5, 1.5),
+    ty=st.floats(-1.5, 1.5),
+    seed=st.integers(0, 1000),
+)
+def test_yaw_recovered_for_any_heading_change(
+    yaw_rad: float, tx: float, ty: float, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    query, place, pairs = two_views(rng, 60, yaw_rad, np.array([tx, ty, 0.0]))
+    result = verify(query, place, pairs, VerificationParams(seed=seed))
+    assert result.inliers >= 58
+    assert abs(wrap_angle_rad(result.yaw_rad - yaw_rad)) < 1e-4
+
+
+def test_deterministic_for_a_seed() -> None:
+    rng = np.random.default_rng(8)
+    query, place, pairs = two_views(rng, 120, 1.0, np.array([0.3, 0.2, 0.0]), n_outliers=70)
+    query = query + rng.normal(0.0, 0.003, query.shape)
+    a = verify(query, place, pairs, VerificationParams(seed=4))
+    b = verify(query, place, pairs, VerificationParams(seed=4))
+    assert a.inliers == b.inliers
+    np.testing.assert_array_equal(a.inlier_pairs, b.inlier_pairs)
+    assert a.yaw_rad == b.yaw_rad
+
+
+def test_too_few_pairs_and_empty_give_no_geometry() -> None:
+    rng = np.random.default_rng(1)
+    query, place, pairs = two_views(rng, 7, 0.3, np.array([0.5, 0.0, 0.0]))
+    result = verify(query, place, pairs, VerificationParams(min_correspondences=8))
+    assert result.inliers == 0 and result.rotation is None and np.isnan(result.yaw_rad)
+    empty = verify(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2), np.int64))
+    assert empty.inliers == 0 and empty.inlier_pairs.shape == (0, 2)
+
+
+def test_degenerate_identical_rays_do_not_raise() -> None:
+    rays = np.tile([[1.0, 0.0, 0.0]], (20, 1))
+    pairs = np.column_stack([np.arange(20), np.arange(20)])
+    result = verify(rays, rays, pairs)
+    assert isinstance(result, Verification)
+    assert result.inliers in (0, 20)
+
+
+def test_bad_input_is_named() -> None:
+    with pytest.raises(ValueError, match="query_rays must have shape"):
+        verify(np.zeros((5, 2)), np.ones((5, 3)), np.zeros((0, 2), np.int64))
+    with pytest.raises(ValueError, match="zero-length"):
+        verify(np.zeros((5, 3)), np.ones((5, 3)), np.zeros((0, 2), np.int64))
+    with pytest.raises(ValueError, match="pairs index outside"):
+        verify(np.ones((5, 3)), np.ones((5, 3)), np.array([[0, 5]]))
+    with pytest.raises(ValueError, match="min_correspondences"):
+        VerificationParams(min_correspondences=4)
+
+
+def test_sampson_error_is_angular_distance_to_the_epipolar_circle() -> None:
+    """Moving a query ray by a small angle off its epipolar great circle gives about that angle
+    (the error splits over the two rays, so it lies between angle/sqrt(2) and angle)."""
+    t = np.array([1.0, 0.0, 0.0])
+    E = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])  # R = I
+    place = np.array([[0.0, 1.0, 0.0]])
+    angle = 0.004
+    query = np.array([[0.0, np.cos(angle), np.sin(angle)]])  # tilted out of the z=0 plane
+    err = tangent_sampson_error_rad(E, place, query)[0]
+    assert angle / np.sqrt(2) - 1e-6 <= err <= angle + 1e-6
+
+
+def test_yaw_from_rotation_convention() -> None:
+    assert yaw_from_rotation(rz(0.5).T) == pytest.approx(0.5)
+
+
+def test_rays_from_fingerprint_geometry() -> None:
+    w, h = 360, 41
+    xy = np.array([[0.0, 20.0], [90.0, 20.0], [180.0, 0.0], [270.0, 40.0]])
+    fp = Fingerprint("sift", w, h, xy, -2 * np.pi * xy[:, 0] / w, np.zeros((4, 128), np.float32))
+    rays = rays_from_fingerprint(fp)
+    np.testing.assert_allclose(np.linalg.norm(rays, axis=1), 1.0)
+    np.testing.assert_allclose(rays[0], [1.0, 0.0, 0.0], atol=1e-12)  # heading, horizon
+    np.testing.assert_allclose(rays[1], [0.0, -1.0, 0.0], atol=1e-12)  # 90° clockwise: right
+    f = w / (2 * np.pi)
+    assert rays[2, 2] == pytest.approx(np.sin(np.arctan(20.0 / f)))  # top row looks up
+    assert rays[3, 2] == pytest.approx(-np.sin(np.arctan(20.0 / f)))
+    assert rays_from_fingerprint(Fingerprint.empty("sift", w, h)).shape == (0, 3)
+    with pytest.raises(ValueError, match="cylinder is 100x41"):
+        rays_from_fingerprint(fp, Cylinder(100, 41))
+    np.testing.assert_allclose(rays_from_angles([np.pi / 2], [0.0]), [[0.0, 1.0, 0.0]], atol=1e-12)

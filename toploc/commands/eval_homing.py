@@ -1,0 +1,191 @@
+"""``toploc eval homing``: ALV homing between every pair of places of a dataset (thesis 5.6-5.7).
+
+Bad input (a missing folder or manifest, a malformed manifest, an unreadable image, no room with
+two places) is a one-line ``Error: ...`` naming the file, and exit status 1.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+import numpy as np
+
+from localizer.features import DETECTORS, ExtractionParams
+from localizer.homing_eval import (
+    BEST_METHOD,
+    METHODS,
+    EvaluationError,
+    HomingRun,
+    Place,
+    evaluate_homing,
+    extract_fingerprints,
+    load_places,
+)
+from localizer.panorama_io import PanoramaError
+from mapdb.errors import MapDatabaseError
+
+
+@contextmanager
+def evaluation_errors() -> Iterator[None]:
+    """Turn bad-input errors into click's one-line ``Error: <message>`` with exit status 1."""
+    try:
+        yield
+    except (MapDatabaseError, PanoramaError, EvaluationError) as error:
+        raise click.ClickException(str(error)) from error
+
+
+def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
+    """The shared ``DATASET --detector --band-deg --rows --workers --progress`` options."""
+    decorators = [
+        click.argument("dataset", type=click.Path(path_type=Path)),
+        click.option(
+            "--detector",
+            type=click.Choice(DETECTORS),
+            default="sift",
+            show_default=True,
+            help="Feature detector (sift = DoG keypoints).",
+        ),
+        click.option(
+            "--band-deg",
+            type=click.FloatRange(0, 90, max_open=True),
+            default=None,
+            help="Keep features within ± this many degrees of the horizon.",
+        ),
+        click.option(
+            "--rows",
+            type=click.Choice(("all", "lower", "upper")),
+            default="all",
+            show_default=True,
+            help="Keep features of all rows or one half.",
+        ),
+        click.option(
+            "--workers",
+            type=click.IntRange(min=0),
+            default=os.cpu_count() or 1,
+            show_default=True,
+            help="Extraction processes (0 or 1: in this process).",
+        ),
+        click.option("--progress/--no-progress", default=True, help="Show progress bars."),
+    ]
+    for decorator in reversed(decorators):
+        function = decorator(function)
+    return function
+
+
+def load_and_extract(
+    dataset: Path,
+    detector: str,
+    band_deg: float | None,
+    rows: str,
+    workers: int,
+    progress: bool,
+) -> tuple[tuple[Place, ...], list, float]:
+    """The places of ``dataset``, their fingerprints, and the extraction time in seconds."""
+    params = ExtractionParams(detector=detector, band_deg=band_deg, rows=rows)
+    places = load_places(dataset)
+    start = time.perf_counter()
+    fingerprints = extract_fingerprints([p.path for p in places], params, workers, progress)
+    return places, fingerprints, time.perf_counter() - start
+
+
+def _plot(run: HomingRun, path: Path, title: str) -> None:
+    from homing.eval_plots import plot_home_vectors
+
+    home_image = run.stats.best_home
+    home = next(k for k, p in enumerate(run.places) if p.image == home_image)
+    room = run.places[home].room
+    members = [k for k, p in enumerate(run.places) if p.room == room]
+    directions = np.full(len(members), np.nan)
+    for row, k in enumerate(members):
+        chosen = np.flatnonzero((run.here == k) & (run.home == home))
+        heading = run.places[k].heading_rad
+        if len(chosen) and heading is not None:
+            directions[row] = run.home_direction_rad[chosen[0]] + heading
+    plot_home_vectors(
+        np.array([run.places[k].position_m for k in members]),
+        members.index(home),
+        directions,
+        path,
+        title=f"{title}: home {home_image} ({room})",
+    )
+
+
+@click.command("homing")
+@extraction_options
+@click.option(
+    "--method",
+    type=click.Choice(METHODS),
+    default="thesis",
+    show_default=True,
+    help=f"thesis: ALV of all bearings, headings known; best: {BEST_METHOD}.",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write the statistics as JSON.",
+)
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Draw the home vectors to the best home (PNG).",
+)
+def homing_command(
+    dataset: Path,
+    detector: str,
+    band_deg: float | None,
+    rows: str,
+    workers: int,
+    progress: bool,
+    method: str,
+    json_path: Path | None,
+    plot_path: Path | None,
+) -> None:
+    """Home from every place of DATASET to every other place of its room; print the errors.
+
+    Prints mean, median and standard deviation of the angular error (eq. 5.5, degrees), the
+    score (eq. 5.6), the best home, n, and the shares of errors under 90° and 10°.
+    """
+    with evaluation_errors():
+        places, fingerprints, extract_s = load_and_extract(
+            dataset, detector, band_deg, rows, workers, progress
+        )
+        start = time.perf_counter()
+        run = evaluate_homing(places, fingerprints, method, progress)
+        pairs_s = time.perf_counter() - start
+    stats = run.stats
+    filters = f"rows={rows}" + ("" if band_deg is None else f" band={band_deg:g}deg")
+    resolved = BEST_METHOD if method == "best" else method
+    click.echo(f"{dataset}: {detector} {filters}, method {method} ({resolved})")
+    click.echo(
+        f"  mean {stats.mean_deg:.2f} deg, median {stats.median_deg:.2f} deg, "
+        f"std {stats.std_deg:.2f} deg, score {stats.score:.4f}"
+    )
+    click.echo(
+        f"  best home {stats.best_home}, n {stats.n} ({stats.n_pairs} pairs, "
+        f"{stats.n_failed} failed), under 90 deg {100 * stats.under_90:.1f}%, "
+        f"under 10 deg {100 * stats.under_10:.1f}%"
+    )
+    click.echo(f"  time: extraction {extract_s:.1f} s, pairs {pairs_s:.1f} s")
+    if json_path is not None:
+        record = stats.to_json(
+            detector=detector,
+            method=method,
+            resolved_method=resolved,
+            rows=rows,
+            band_deg=band_deg,
+            dataset=str(dataset),
+        )
+        json_path.write_text(json.dumps(record, indent=2) + "\n")
+    if plot_path is not None:
+        _plot(run, plot_path, f"{detector} {filters} {method}")
+        click.echo(f"  wrote {plot_path}")
