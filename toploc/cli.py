@@ -7,9 +7,11 @@ import click
 from toploc import __version__
 from toploc.commands.belief import belief
 from toploc.commands.dataset import dataset
+from toploc.commands.demo import demo
 from toploc.commands.eval import eval_group
 from toploc.commands.localize import localize
 from toploc.commands.map import map_group
+from toploc.commands.serve import serve
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
 
@@ -27,3 +29,5 @@ main.add_command(eval_group)
 main.add_command(sim_group)
 main.add_command(belief)
 main.add_command(localize)
+main.add_command(demo)
+main.add_command(serve)

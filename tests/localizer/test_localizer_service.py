@@ -1,0 +1,113 @@
+"""The localization service: the runner's thread safety, the service over Zenoh on loopback,
+and ``toploc demo`` end to end on the small rendered map."""
+
+from __future__ import annotations
+
+import math
+import shutil
+import socket
+import threading
+
+import pytest
+from click.testing import CliRunner
+
+from localizer.localizer import LoadedMap, Localizer
+from localizer.node import LocalizerClient, check_belief
+from localizer.service import LocalizationRunner
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.world import Pose2D
+from robot.worlds import make_world
+from toploc.bus import BusConfig, open_session
+from toploc.cli import main
+from toploc.service import start_service
+
+CAMERA = PanoramaCamera(512, 96)
+
+
+def free_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def robot_in(room: str, x_m: float, y_m: float) -> SimulatedRobot:
+    world = make_world("building")
+    pose = world.building_pose(room, Pose2D(x_m, y_m, math.radians(30.0)))
+    return SimulatedRobot(world, pose, camera=CAMERA, seed=9)
+
+
+class GatedRobot:
+    """A simulated robot whose capture waits until the test opens the gate."""
+
+    def __init__(self, robot: SimulatedRobot) -> None:
+        self.robot, self.gate, self.waiting = robot, threading.Event(), threading.Event()
+
+    def capture(self):
+        self.waiting.set()
+        self.gate.wait(10)
+        return self.robot.capture()
+
+    def move(self, turn_rad, forward_m):
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self):
+        return self.robot.odometry()
+
+
+@pytest.fixture(scope="module")
+def loaded(building_map) -> LoadedMap:
+    return LoadedMap.from_database(building_map[0])
+
+
+def test_a_passive_localize_publishes_a_belief_in_the_bus_format(loaded):
+    published = []
+    runner = LocalizationRunner(Localizer(loaded), robot_in("kitchen", 2.0, 3.0))
+    runner.publish = published.append
+    belief = runner.localize(active=False)
+    check_belief("test", belief)
+    assert max(belief["rooms"], key=belief["rooms"].get) == "kitchen"
+    assert belief["best_place"]["room"] == "kitchen"
+    assert published[-1] == belief
+
+
+def test_belief_answers_and_reset_is_refused_while_a_localization_runs(loaded):
+    robot = GatedRobot(robot_in("kitchen", 2.0, 3.0))
+    runner = LocalizationRunner(Localizer(loaded), robot)
+    before = runner.belief()
+    worker = threading.Thread(target=runner.localize, args=(False,))
+    worker.start()
+    assert robot.waiting.wait(10)
+    assert runner.belief() == before
+    with pytest.raises(RuntimeError, match="a localization is running"):
+        runner.reset(None)
+    robot.gate.set()
+    worker.join(30)
+    assert before["best_place"] is None
+    assert runner.belief()["best_place"]["room"] == "kitchen"
+    assert runner.reset({"seminar": 1.0})["rooms"]["seminar"] == 1.0
+
+
+def test_the_service_localizes_over_zenoh_for_a_client_session(building_map):
+    endpoint = free_endpoint()
+    service = BusConfig(robot_id="r7", listen=(endpoint,))
+    client_config = BusConfig(robot_id="r7", listen=(), connect=(endpoint,))
+    robot = robot_in("seminar", 3.1, 3.3)
+    with start_service(building_map[0], service, robot), open_session(client_config) as s:
+        client = LocalizerClient(s, "r7", timeout_s=5.0)
+        belief = client.localize(active=False)
+        assert max(belief["rooms"], key=belief["rooms"].get) == "seminar"
+        assert client.belief() == belief
+        assert client.reset({"kitchen": 1.0})["rooms"]["kitchen"] == 1.0
+
+
+def test_the_demo_runs_end_to_end_on_a_cached_map(building_map, tmp_path, monkeypatch):
+    cached = tmp_path / "building-0"
+    cached.mkdir()
+    shutil.copy(building_map[0], cached / "map.db")
+    (cached / "built-sift").touch()
+    monkeypatch.setenv("TOPLOC_HOME", str(tmp_path))
+    result = CliRunner().invoke(main, ["demo", "--endpoint", free_endpoint(), "--seed", "4"])
+    assert result.exit_code == 0, result.output
+    assert "3/3 client: localize, active" in result.output
+    assert "the robot was kidnapped into office_b" in result.output

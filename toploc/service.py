@@ -1,0 +1,61 @@
+"""Running toploc as a service: the nodes of one robot on one Zenoh session.
+
+:func:`start_service` opens the session and declares the map node, the localizer node and,
+when a robot object is given (the simulated robot here), its robot node. The localizer always
+drives the robot through the bus (:class:`robot.node.RemoteRobot`), so a real base running its
+own robot node elsewhere is used the same way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.node import LocalizerNode
+from localizer.service import LocalizationRunner
+from mapdb.node import MapNode
+from robot.interface import Robot
+from robot.node import RemoteRobot, RobotNode
+from toploc.bus import BusConfig, open_session
+
+
+@dataclass(frozen=True)
+class Service:
+    """A running service: its session, the runner behind ``localizer/*`` and the map."""
+
+    session: zenoh.Session
+    config: BusConfig
+    runner: LocalizationRunner
+    localizer: Localizer
+
+
+@contextmanager
+def start_service(
+    db_path: Path,
+    config: BusConfig,
+    robot: Robot | None = None,
+    policy: str = "separating",
+    localizer_config: LocalizerConfig | None = None,
+) -> Iterator[Service]:
+    """Serve the map at ``db_path`` for robot ``config.robot_id``; everything is undeclared and
+    the session closed on exit (an unclosed session keeps the process alive)."""
+    localizer_config = localizer_config or LocalizerConfig()
+    loaded = LoadedMap.from_database(db_path, localizer_config.detector)
+    localizer = Localizer(loaded, localizer_config)
+    robot_id = config.robot_id
+    with ExitStack() as stack:
+        session = stack.enter_context(open_session(config))
+        stack.enter_context(MapNode(session, robot_id, db_path))
+        if robot is not None:
+            stack.enter_context(RobotNode(session, robot_id, robot))
+        remote = RemoteRobot(session, robot_id)
+        stack.callback(remote.close)
+        runner = LocalizationRunner(localizer, remote, policy)
+        node = stack.enter_context(LocalizerNode(session, robot_id, runner))
+        runner.publish = node.publish
+        yield Service(session, config, runner, localizer)
