@@ -146,21 +146,29 @@ def place_evidence(
     params: EvidenceParams | None = None,
     index: PlaceIndex | None = None,
     place_cylinder: Cylinder | None = None,
+    exclude: int | None = None,
 ) -> QueryEvidence:
     """Evidence of ``query`` for the places of ``table`` (one detector).
 
     Brute force over every place when ``index`` is None; otherwise only the index's
     ``params.shortlist`` best places are verified (the others are left out of the result).
     An empty map gives no places; an empty query gives every candidate 0 matches.
-    ``place_cylinder`` defaults to the query's cylinder.
+    ``place_cylinder`` defaults to the query's cylinder. ``exclude`` (a place id) leaves that
+    place out of retrieval and verification (leave-one-out evaluation of a map's own places).
     """
     params = params or EvidenceParams()
     _check_inputs(query, table)
     t0 = time.perf_counter()
+    left_out = None
+    if exclude is not None:
+        matches = np.flatnonzero(table.place_ids == exclude)
+        left_out = int(matches[0]) if len(matches) else None
     if index is None:
         candidates = np.arange(len(table.place_ids))
+        if left_out is not None:
+            candidates = candidates[candidates != left_out]
     else:
-        candidates = index.shortlist(query.descriptors, params.shortlist)
+        candidates = index.shortlist(query.descriptors, params.shortlist, left_out)
     t1 = time.perf_counter()
     query_rays = rays_from_fingerprint(query)
     cylinder = cylinder_of(query) if place_cylinder is None else place_cylinder

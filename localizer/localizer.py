@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -158,13 +158,9 @@ class Localizer:
     ) -> Observation:
         """Evidence for an already extracted fingerprint; ``exclude`` leaves one place out
         (leave-one-out evaluation of the map's own places)."""
-        params = self.config.evidence
-        if exclude is not None:
-            params = replace(params, shortlist=params.shortlist + 1)
-        evidence = place_evidence(fingerprint, self.map.table, params, self.map.index)
-        if exclude is not None:
-            kept = tuple(e for e in evidence.places if e.place_id != exclude)
-            evidence = QueryEvidence(kept, evidence.timing_ms)
+        evidence = place_evidence(
+            fingerprint, self.map.table, self.config.evidence, self.map.index, exclude=exclude
+        )
         timing = {"extraction": extraction_ms, **evidence.timing_ms}
         return Observation(fingerprint, evidence, timing)
 

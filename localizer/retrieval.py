@@ -79,8 +79,13 @@ class PlaceIndex:
         """Number of places in the index."""
         return len(self._weights)
 
-    def scores(self, descriptors: np.ndarray) -> np.ndarray:
-        """(n_places,) vote score of every place for query ``descriptors`` (n, d) float32."""
+    def scores(self, descriptors: np.ndarray, exclude: int | None = None) -> np.ndarray:
+        """(n_places,) vote score of every place for query ``descriptors`` (n, d) float32.
+
+        ``exclude`` (a place index) takes that place's descriptors out of the neighbours, as if
+        it were not in the index (leave-one-out: a place's own descriptors are exact matches and
+        would otherwise take every vote).
+        """
         scores = np.zeros(self.n_places)
         descriptors = np.asarray(descriptors, dtype=np.float32)
         if self._flann is None or len(descriptors) == 0:
@@ -91,10 +96,19 @@ class PlaceIndex:
                 f"got {descriptors.shape}"
             )
         k = min(self.params.neighbours, len(self._descriptors))
+        k_search = min(2 * k if exclude is not None else k, len(self._descriptors))
         rows, dist_sq = self._flann.knnSearch(
-            np.ascontiguousarray(descriptors), k, params={"checks": self.params.checks}
+            np.ascontiguousarray(descriptors), k_search, params={"checks": self.params.checks}
         )
-        rows, dist_sq = rows.reshape(len(descriptors), k), dist_sq.reshape(len(descriptors), k)
+        rows = rows.reshape(len(descriptors), k_search)
+        dist_sq = dist_sq.reshape(len(descriptors), k_search).astype(np.float64)
+        if exclude is not None:
+            dropped = (rows < 0) | (self._keypoint_place[np.maximum(rows, 0)] == exclude)
+            dist_sq = np.where(dropped, np.inf, dist_sq)
+            rows = np.where(dropped, -1, rows)
+            order = np.argsort(dist_sq, axis=1, kind="stable")[:, :k]
+            rows = np.take_along_axis(rows, order, axis=1)
+            dist_sq = np.take_along_axis(dist_sq, order, axis=1)
         valid = (rows >= 0) & (dist_sq <= dist_sq[:, :1] * self.params.max_distance_ratio**2)
         query_of = np.broadcast_to(np.arange(len(descriptors))[:, None], rows.shape)[valid]
         place_of = self._keypoint_place[rows[valid]]
@@ -105,14 +119,19 @@ class PlaceIndex:
         np.add.at(scores, hit_place, 1.0 / places_hit[hit_query])
         return scores * self._weights
 
-    def shortlist(self, descriptors: np.ndarray, k: int) -> np.ndarray:
+    def shortlist(
+        self, descriptors: np.ndarray, k: int, exclude: int | None = None
+    ) -> np.ndarray:
         """Indices into the table's places of the ``k`` best-voted places, best first.
 
         Ties are broken by place index; places without a vote are still returned if fewer
-        than ``k`` got one (so an index over ``<= k`` places returns them all).
+        than ``k`` got one (so an index over ``<= k`` places returns them all). ``exclude``:
+        a place index left out (see :meth:`scores`).
         """
         if k < 1:
             raise ValueError(f"k must be >= 1, got {k!r}")
-        scores = self.scores(descriptors)
+        scores = self.scores(descriptors, exclude)
         order = np.lexsort((np.arange(self.n_places), -scores))
-        return order[: min(k, self.n_places)]
+        if exclude is not None:
+            order = order[order != exclude]
+        return order[:k]

@@ -46,6 +46,20 @@ def test_planted_place_is_shortlisted_first() -> None:
         assert index.shortlist(query, 3)[0] == place
 
 
+def test_leaving_a_place_out_lets_its_near_copy_win() -> None:
+    rng = np.random.default_rng(2)
+    table = random_table(rng, [100, 100, 100, 100])
+    # Place 3 is a slightly changed view of place 1; the query is place 1's own descriptors.
+    start = table.offsets[1]
+    table.descriptors[table.offsets[3] :] = table.descriptors[start : start + 100] + 0.02
+    index = PlaceIndex.build(table)
+    own = table.descriptors[start : start + 100]
+    assert index.shortlist(own, 2)[0] == 1
+    left_out = index.shortlist(own, 2, exclude=1)
+    assert left_out[0] == 3
+    assert 1 not in left_out
+
+
 def test_shortlist_edge_cases() -> None:
     rng = np.random.default_rng(1)
     table = random_table(rng, [30, 40])
