@@ -16,6 +16,7 @@ import functools
 import importlib
 import json
 import os
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -90,7 +91,7 @@ def _map_errors() -> Iterator[None]:
 def _log_outcome(outcome: Outcome, verbose: bool) -> None:
     """Failures always, one line each, under the progress bar; the rest with ``--verbose``."""
     if outcome.status is Status.FAILED or verbose:
-        tqdm.write(outcome.describe(), file=click.get_text_stream("stderr"))
+        tqdm.write(outcome.describe(), file=sys.stderr)
 
 
 def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
