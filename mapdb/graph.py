@@ -30,6 +30,13 @@ def graph_from_rooms(rooms: Iterable[RoomSummary], edges: Iterable[tuple[str, st
     return graph
 
 
+def connect_known_rooms(map_db: MapDatabase, edges: Iterable[tuple[str, str]]) -> int:
+    """Add the edges whose two rooms are in the map (e.g. a dataset's ``edges.csv``, of which
+    some rooms may have no panorama); return how many were new."""
+    known = {room.name for room in map_db.rooms()}
+    return sum(map_db.connect_rooms(a, b) for a, b in edges if a in known and b in known)
+
+
 def room_graph(map_db: MapDatabase) -> nx.Graph:
     """The room graph of ``map_db`` (every room is a node, connected or not)."""
     return graph_from_rooms(map_db.rooms(), map_db.edges())

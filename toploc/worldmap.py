@@ -14,10 +14,36 @@ from pathlib import Path
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import read_edges, read_manifest
+from mapdb.graph import connect_known_rooms
 from robot.dataset import MANIFEST_NAME, render_dataset
+from robot.render import PanoramaCamera
+from robot.sim_robot import MotionNoise, SimulatedRobot
+from robot.world import World
 from toploc.commands.map import resolve_extractor
 
 HOME_ENV = "TOPLOC_HOME"
+
+
+def kidnapped_robot(
+    world: World,
+    room: str,
+    seed: int,
+    db_path: Path,
+    motion_noise: float = 0.05,
+    condition: str = "default",
+) -> SimulatedRobot:
+    """The simulated robot at a seeded random pose in ``room``, with a camera that captures
+    panoramas of the same size as the map's and ``motion_noise`` (fraction of each turn and
+    drive)."""
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        places = map_db.places()
+    if not places:
+        raise ValueError(f"map {db_path} has no places")
+    camera = PanoramaCamera(places[0].image_width_px, places[0].image_height_px)
+    noise = MotionNoise(motion_noise, motion_noise)
+    return SimulatedRobot.kidnapped(
+        world, room, seed=seed, condition=condition, camera=camera, noise=noise
+    )
 
 
 def cache_dir() -> Path:
@@ -46,10 +72,7 @@ def ensure_world_map(
         report = build_map(map_db, entries, resolve_extractor((detector,)), progress=progress)
         if report.interrupted:
             raise KeyboardInterrupt
-        known = {room.name for room in map_db.rooms()}
-        for a, b in read_edges(dataset):
-            if a in known and b in known:
-                map_db.connect_rooms(a, b)
+        connect_known_rooms(map_db, read_edges(dataset))
     failed = [o.image for o in report.outcomes if o.status is Status.FAILED]
     if failed:
         raise RuntimeError(f"{len(failed)} panorama(s) of {dataset} failed: {', '.join(failed)}")

@@ -58,6 +58,7 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     from mapdb.build import build_map
     from mapdb.database import MapDatabase
     from mapdb.dataset import read_edges, read_manifest
+    from mapdb.graph import connect_known_rooms
     from robot.dataset import render_dataset
     from robot.render import PanoramaCamera
     from toploc.commands.map import resolve_extractor
@@ -70,6 +71,5 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     with MapDatabase.open(db_path) as map_db:
         build_map(map_db, read_manifest(dataset), resolve_extractor(("sift",)), workers=0,
                   progress=False)
-        for a, b in read_edges(dataset):
-            map_db.connect_rooms(a, b)
+        connect_known_rooms(map_db, read_edges(dataset))
     return db_path, dataset

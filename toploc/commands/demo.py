@@ -15,12 +15,10 @@ import click
 
 from localizer.node import LocalizerClient
 from localizer.policy import POLICIES
-from robot.render import PanoramaCamera
-from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.worlds import make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError, open_session
 from toploc.service import start_service
-from toploc.worldmap import ensure_world_map
+from toploc.worldmap import ensure_world_map, kidnapped_robot
 
 WORLD = "building"
 LOOK_ALIKE = ("office_a", "office_b")
@@ -49,22 +47,14 @@ def demo(room: str, seed: int, policy: str, endpoint: str, robot_id: str) -> Non
     world = make_world(WORLD)
     service_config = BusConfig(robot_id=robot_id, listen=(endpoint,))
     client_config = BusConfig(robot_id=robot_id, listen=(), connect=(endpoint,))
+    robot = kidnapped_robot(world, room, seed, db_path)
     try:
-        with start_service(db_path, service_config, _robot(world, room, seed, db_path), policy):
+        with start_service(db_path, service_config, robot, policy):
             click.echo(f"2/3 service: Zenoh peer on {endpoint}, keys toploc/{robot_id}/**")
             with open_session(client_config) as session:
                 _client_run(session, robot_id, room)
     except BusError as error:
         raise click.ClickException(str(error)) from error
-
-
-def _robot(world: Any, room: str, seed: int, db_path: Any) -> SimulatedRobot:
-    from localizer.localizer import LoadedMap
-
-    size = LoadedMap.from_database(db_path).image_size_px
-    return SimulatedRobot.kidnapped(
-        world, room, seed=seed, camera=PanoramaCamera(*size), noise=MotionNoise(0.05, 0.05)
-    )
 
 
 def _client_run(session: Any, robot_id: str, true_room: str) -> None:

@@ -29,7 +29,7 @@ from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
-from mapdb.graph import export_graphml
+from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import MapInfo
 
 EXTRACTOR_ENV = "TOPLOC_MAP_EXTRACTOR"
@@ -108,12 +108,6 @@ def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
         raise click.ClickException(f"{len(failed)} image(s) failed: {', '.join(failed)}")
 
 
-def _connect_edges(map_db: MapDatabase, edges: list[tuple[str, str]]) -> int:
-    """Add the dataset's room-graph edges whose rooms are in the map; the number added."""
-    known = {room.name for room in map_db.rooms()}
-    return sum(map_db.connect_rooms(a, b) for a, b in edges if a in known and b in known)
-
-
 db_option = click.option(
     "--db",
     "db_path",
@@ -170,7 +164,7 @@ def build_command(
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
             )
             if not report.interrupted:
-                added = _connect_edges(map_db, edges)
+                added = connect_known_rooms(map_db, edges)
                 if added:
                     click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
     _finish(report, db_path, verbose)

@@ -10,14 +10,11 @@ from pathlib import Path
 
 import click
 
-from localizer.localizer import LoadedMap
 from localizer.policy import POLICIES
-from robot.render import PanoramaCamera
-from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
 from toploc.service import start_service
-from toploc.worldmap import ensure_world_map
+from toploc.worldmap import ensure_world_map, kidnapped_robot
 
 
 @click.command("serve")
@@ -61,14 +58,7 @@ def serve(
     db = db_path or ensure_world_map(sim_world)
     robot = None
     if not no_sim:
-        size = LoadedMap.from_database(db).image_size_px
-        robot = SimulatedRobot.kidnapped(
-            make_world(sim_world),
-            sim_room,
-            seed=seed,
-            camera=PanoramaCamera(*size),
-            noise=MotionNoise(0.05, 0.05),
-        )
+        robot = kidnapped_robot(make_world(sim_world), sim_room, seed, db)
     config = BusConfig(robot_id=robot_id, mode=mode, listen=listen, connect=connect)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())

@@ -19,10 +19,8 @@ from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.policy import POLICIES
 from robot.conditions import CONDITIONS
-from robot.render import PanoramaCamera
-from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.worlds import make_world
-from toploc.worldmap import ensure_world_map
+from toploc.worldmap import ensure_world_map, kidnapped_robot
 
 # The rooms a kidnapped robot is put in, per world: its look-alike rooms.
 KIDNAP_ROOMS = {"building": ("office_a", "office_b")}
@@ -126,20 +124,14 @@ def kidnap(
     """
     db = db_path or ensure_world_map(world)
     localizer = Localizer(LoadedMap.from_database(db), LocalizerConfig())
-    camera = PanoramaCamera(*localizer.map.image_size_px)  # capture like the map's panoramas
     scene_world = make_world(world)
     params = ActiveParams(max_targets=max_targets)
     rooms = KIDNAP_ROOMS[world]
     done: list[Trial] = []
     for i in tqdm(range(trials), desc=f"kidnap/{policy}", unit="trial"):
         true_room = rooms[i % len(rooms)]
-        robot = SimulatedRobot.kidnapped(
-            scene_world,
-            true_room,
-            seed=seed * 100_000 + i,
-            condition=condition,
-            camera=camera,
-            noise=MotionNoise(motion_noise, motion_noise),
+        robot = kidnapped_robot(
+            scene_world, true_room, seed * 100_000 + i, db, motion_noise, condition
         )
         start = time.perf_counter()
         result = localize_actively(localizer, robot, policy, params)
