@@ -18,6 +18,7 @@ from localizer.policy import (
     PlaceSimilarity,
     PolicyContext,
     make_policy,
+    separating_pairs,
 )
 from localizer.visual_homing import HomingParams, HomingResult, drive_home
 from robot.interface import Robot
@@ -63,21 +64,9 @@ class ActiveResult:
 def _similarity_for(
     localizer: Localizer, belief: RoomBelief, min_probability: float, tried: set[int]
 ) -> PlaceSimilarity:
-    """The stored-view similarity the separating policy reads: the untried places of the most
-    likely room that has any (the candidates) against every place of the rival rooms."""
-    places = localizer.map.places
-    for room, probability in belief.ranked():
-        if probability <= 0:  # the policy never targets an excluded room
-            return localizer.similarity(())
-        candidates = tuple(
-            p.place_id for p in places if p.room == room and p.place_id not in tried
-        )
-        if candidates:
-            break
-    else:
-        return localizer.similarity(())
-    rivals = {r for r, p in belief.as_dict().items() if p >= min_probability and r != room}
-    return localizer.similarity(candidates, tuple(p.place_id for p in places if p.room in rivals))
+    """The stored-view similarity the separating policy will read for this belief."""
+    candidates, rivals = separating_pairs(belief, localizer.map.places, tried, min_probability)
+    return localizer.similarity(candidates, rivals)
 
 
 def localize_actively(

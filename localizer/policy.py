@@ -134,6 +134,49 @@ def _untried(places: Sequence[MapPlace], room: str, tried: set[int]) -> list[Map
     return [p for p in places if p.room == room and p.place_id not in tried]
 
 
+def _target_room(
+    probabilities: Mapping[str, float],
+    places: Sequence[MapPlace],
+    tried: set[int],
+    min_room_probability: float,
+) -> tuple[str, list[MapPlace]] | None:
+    """The most likely room (above ``min_room_probability``) with untried places, and those."""
+    for room in _ranked_rooms(probabilities, min_room_probability):
+        candidates = _untried(places, room, tried)
+        if candidates:
+            return room, candidates
+    return None
+
+
+def _rivals(
+    probabilities: Mapping[str, float], room: str, min_rival_probability: float
+) -> dict[str, float]:
+    """The other rooms at least ``min_rival_probability`` likely, with their probabilities."""
+    return {r: p for r, p in probabilities.items() if r != room and p >= min_rival_probability}
+
+
+def separating_pairs(
+    belief: Mapping[str, float] | Any,
+    places: Sequence[MapPlace],
+    tried: set[int],
+    min_rival_probability: float = 0.02,
+    min_room_probability: float = 0.0,
+) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """``(candidates, rival places)``: the rows and columns of :class:`PlaceSimilarity` that
+    :meth:`DiscriminativePolicy.choose` reads for this belief (so a caller need compute no
+    more; both empty when there is nothing left to try)."""
+    probabilities = _belief_map(belief)
+    target = _target_room(probabilities, places, tried, min_room_probability)
+    if target is None:
+        return (), ()
+    room, candidates = target
+    rivals = _rivals(probabilities, room, min_rival_probability)
+    return (
+        tuple(c.place_id for c in candidates),
+        tuple(p.place_id for p in places if p.room in rivals),
+    )
+
+
 @dataclass
 class ThesisPolicy:
     """Goldhoorn 2008: home to the best place (most inliers in the latest evidence) of the most
@@ -154,12 +197,11 @@ class ThesisPolicy:
         context: PolicyContext | None = None,
     ) -> int | None:
         inliers = _inliers_by_place(evidence)
-        for room in _ranked_rooms(_belief_map(belief), self.min_room_probability):
-            candidates = _untried(places, room, tried)
-            if candidates:
-                best = max(candidates, key=lambda p: (inliers.get(p.place_id, 0), -p.place_id))
-                return best.place_id
-        return None
+        target = _target_room(_belief_map(belief), places, tried, self.min_room_probability)
+        if target is None:
+            return None
+        best = max(target[1], key=lambda p: (inliers.get(p.place_id, 0), -p.place_id))
+        return best.place_id
 
 
 @dataclass
@@ -202,21 +244,20 @@ class DiscriminativePolicy:
     ) -> int | None:
         probabilities = _belief_map(belief)
         inliers = _inliers_by_place(evidence)
-        for room in _ranked_rooms(probabilities, self.min_room_probability):
-            candidates = _untried(places, room, tried)
-            if not candidates:
-                continue
-            here = _position_in_room(room, places, inliers, context)
-            scored = [
-                (
-                    self.score(c, room, probabilities, places, here),
-                    inliers.get(c.place_id, 0),
-                    -c.place_id,
-                )
-                for c in candidates
-            ]
-            return -max(scored)[2]
-        return None
+        target = _target_room(probabilities, places, tried, self.min_room_probability)
+        if target is None:
+            return None
+        room, candidates = target
+        here = _position_in_room(room, places, inliers, context)
+        scored = [
+            (
+                self.score(c, room, probabilities, places, here),
+                inliers.get(c.place_id, 0),
+                -c.place_id,
+            )
+            for c in candidates
+        ]
+        return -max(scored)[2]
 
     def score(
         self,
@@ -241,7 +282,7 @@ class DiscriminativePolicy:
         """``1 - confusion`` of ``place_id`` against the rivals of ``room`` (in [0, 1])."""
         row = self.similarity.inliers[self.similarity.index(place_id)]
         own = row[self.similarity.index(place_id)]
-        rivals = {r: p for r, p in belief.items() if r != room and p >= self.min_rival_probability}
+        rivals = _rivals(belief, room, self.min_rival_probability)
         total = sum(rivals.values())
         if total <= 0:
             return 1.0

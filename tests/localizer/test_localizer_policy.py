@@ -24,6 +24,7 @@ from localizer.policy import (
     PolicyContext,
     ThesisPolicy,
     make_policy,
+    separating_pairs,
 )
 
 
@@ -108,6 +109,22 @@ def test_separating_picks_the_place_that_differs():
         assert policy.choose(belief, EVIDENCE, PLACES, set()) == door_place
     # the thesis goes to the best-matching place instead, however the rooms differ
     assert ThesisPolicy().choose(belief, EVIDENCE, PLACES, set()) == 2
+
+
+def test_separating_pairs_are_all_the_policy_reads():
+    belief = {"a": 0.5, "b": 0.45, "c": 0.01}
+    candidates, rivals = separating_pairs(belief, PLACES, tried={2})
+    assert candidates == (1, 3)
+    assert rivals == (11, 12)  # c is below the 2 % rival threshold
+    full = lookalike_similarity(3)
+    keep = [full.index(p) for p in (*candidates, *rivals)]
+    only_pairs = PlaceSimilarity((*candidates, *rivals), full.inliers[np.ix_(keep, keep)])
+    choice = DiscriminativePolicy(only_pairs).choose(belief, EVIDENCE, PLACES, {2})
+    assert choice == DiscriminativePolicy(full).choose(belief, EVIDENCE, PLACES, {2}) == 3
+
+
+def test_separating_pairs_are_empty_when_everything_was_tried():
+    assert separating_pairs({"a": 1.0}, PLACES, tried={1, 2, 3, 11, 12, 21}) == ((), ())
 
 
 def test_separating_score_is_documented_formula():
