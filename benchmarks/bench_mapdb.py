@@ -22,16 +22,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
-from mapdb import (
-    MapDatabase,
-    NewPlace,
-    Status,
-    build_map,
-    load_fingerprint_table,
-    load_fingerprints,
-)
+from mapdb.build import Status, build_map
+from mapdb.database import MapDatabase
 from mapdb.dataset import read_manifest
+from mapdb.loading import load_fingerprint_table, load_fingerprints
+from mapdb.records import Fingerprint, NewPlace
 from toploc.commands.map import parse_detectors, resolve_extractor
 
 

@@ -1,7 +1,7 @@
 """Active disambiguation (thesis chapter 6): while the belief is ambiguous, drive to a telling
 place by visual homing, look again there, and update the belief.
 
-Works with any :class:`robot.interface.Robot`; the policy that picks where to go is pluggable
+Works with any :class:`localizer.robot_protocol.Robot`; the policy that picks where to go is pluggable
 (:mod:`localizer.policy`).
 """
 
@@ -20,8 +20,8 @@ from localizer.policy import (
     make_policy,
     separating_pairs,
 )
+from localizer.robot_protocol import Robot
 from localizer.visual_homing import HomingParams, HomingResult, drive_home
-from robot.interface import Robot
 
 # A short homing move rarely leaves the room: keep most of the mass where it is.
 HOMING_STAY_PROBABILITY = 0.98
@@ -99,7 +99,7 @@ def localize_actively(
             break
         tried.add(target)
         notify(localizer.belief(LocalizationState.HOMING))
-        goal = localizer.map.fingerprints[target]
+        goal = localizer.map.fingerprint(target)
         homing = drive_home(robot, goal, localizer.extract, params.homing)
         frames += len(homing.lengths) + 1
         distance += homing.distance_m

@@ -7,8 +7,9 @@ with the ratio test (:func:`localizer.matching.match_descriptors`), and places w
 (:func:`localizer.verification.verify`). The inlier count is the evidence; the recovered yaw
 (``heading_query - heading_place``) is kept as a visual compass for homing.
 
-Stored places are assumed to share the query's cylinder geometry (same camera) unless
-``place_cylinder`` is given: the map table keeps keypoint rows and bearings but not image sizes.
+Each stored place is read on its own cylinder (the table keeps every place's image size and
+extraction parameters); its keypoints' rays are computed once per map
+(:func:`localizer.rays.rays_from_table`) and passed in as ``table_rays``.
 """
 
 from __future__ import annotations
@@ -18,13 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
 from localizer.matching import DEFAULT_RATIO, match_descriptors
-from localizer.panorama import Cylinder
-from localizer.rays import cylinder_of, rays_from_fingerprint, rays_from_keypoints
+from localizer.rays import rays_from_fingerprint, rays_from_table
 from localizer.retrieval import PlaceIndex
 from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, verify
-from mapdb.loading import FingerprintTable
+from mapdb.records import Fingerprint, FingerprintTable
 
 
 @dataclass(frozen=True)
@@ -116,25 +115,19 @@ def evaluate_place(
     query: Fingerprint,
     query_rays: np.ndarray,
     table: FingerprintTable,
+    table_rays: np.ndarray,
     place_index: int,
     params: EvidenceParams,
-    place_cylinder: Cylinder,
 ) -> PlaceEvidence:
-    """Match and verify the query against the place at ``place_index`` of ``table``."""
-    start, stop = int(table.offsets[place_index]), int(table.offsets[place_index + 1])
-    pairs = match_descriptors(query.descriptors, table.descriptors[start:stop], params.ratio)
+    """Match and verify the query against the place at ``place_index`` of ``table``, whose
+    stacked rows have the unit rays ``table_rays`` (N, 3)."""
+    rows = table.rows(place_index)
+    pairs = match_descriptors(query.descriptors, table.descriptors[rows], params.ratio)
     place_id, room = int(table.place_ids[place_index]), table.rooms[place_index]
     if len(pairs) < params.min_matches:
         empty = np.zeros((0, 2), dtype=np.int64)
         return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty)
-    rows = pairs[:, 1] + start
-    place_rays = np.zeros((stop - start, 3))
-    place_rays[pairs[:, 1]] = rays_from_keypoints(
-        table.keypoints_xy[rows], table.bearings_rad[rows], place_cylinder
-    )
-    # Unmatched rows are never read; give them a valid unit ray for the input check.
-    place_rays[np.linalg.norm(place_rays, axis=1) == 0] = (1.0, 0.0, 0.0)
-    result = verify(query_rays, place_rays, pairs, params.verification())
+    result = verify(query_rays, table_rays[rows], pairs, params.verification())
     return PlaceEvidence(
         place_id, room, len(pairs), result.inliers, result.yaw_rad, result.inlier_pairs
     )
@@ -145,19 +138,26 @@ def place_evidence(
     table: FingerprintTable,
     params: EvidenceParams | None = None,
     index: PlaceIndex | None = None,
-    place_cylinder: Cylinder | None = None,
     exclude: int | None = None,
+    table_rays: np.ndarray | None = None,
 ) -> QueryEvidence:
     """Evidence of ``query`` for the places of ``table`` (one detector).
 
     Brute force over every place when ``index`` is None; otherwise only the index's
     ``params.shortlist`` best places are verified (the others are left out of the result).
     An empty map gives no places; an empty query gives every candidate 0 matches.
-    ``place_cylinder`` defaults to the query's cylinder. ``exclude`` (a place id) leaves that
-    place out of retrieval and verification (leave-one-out evaluation of a map's own places).
+    ``exclude`` (a place id) leaves that place out of retrieval and verification (leave-one-out
+    evaluation of a map's own places). ``table_rays``: the table's rays if already computed
+    (a loaded map keeps them), else they are computed here.
     """
     params = params or EvidenceParams()
     _check_inputs(query, table)
+    if table_rays is None:
+        table_rays = rays_from_table(table)
+    elif table_rays.shape != (len(table.bearings_rad), 3):
+        raise ValueError(
+            f"table_rays must have shape ({len(table.bearings_rad)}, 3), got {table_rays.shape}"
+        )
     t0 = time.perf_counter()
     left_out = None
     if exclude is not None:
@@ -171,9 +171,8 @@ def place_evidence(
         candidates = index.shortlist(query.descriptors, params.shortlist, left_out)
     t1 = time.perf_counter()
     query_rays = rays_from_fingerprint(query)
-    cylinder = cylinder_of(query) if place_cylinder is None else place_cylinder
     evidence = [
-        evaluate_place(query, query_rays, table, int(i), params, cylinder) for i in candidates
+        evaluate_place(query, query_rays, table, table_rays, int(i), params) for i in candidates
     ]
     t2 = time.perf_counter()
     evidence.sort(key=lambda e: (-e.inliers, -e.matches, e.place_id))

@@ -1,7 +1,7 @@
 """Keypoints and descriptors on a cylindrical panorama: SIFT (DoG) and MSER, each with a bearing.
 
 ``extract(image, params)`` takes a grey ``uint8`` panorama (column 0 along the heading, columns
-clockwise; see :mod:`localizer.panorama`) and returns a :class:`~localizer.fingerprint.Fingerprint`.
+clockwise; see :mod:`localizer.panorama`) and returns a :class:`~mapdb.records.Fingerprint`.
 
 - ``"sift"``: Lowe's DoG keypoints with SIFT descriptors (``cv2.SIFT_create``).
 - ``"mser"``: maximally stable extremal regions (``cv2.MSER_create``); each region becomes a
@@ -36,7 +36,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
 from localizer.panorama import (
     ROWS_SELECTIONS,
     Cylinder,
@@ -44,6 +43,7 @@ from localizer.panorama import (
     horizon_band_mask,
     rows_mask,
 )
+from mapdb.records import Fingerprint
 
 DETECTORS: tuple[str, ...] = ("sift", "mser")
 SIFT_DESCRIPTOR_SIZE = 128

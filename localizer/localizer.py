@@ -1,7 +1,8 @@
 """The localizer: a loaded map, the evidence of one panorama, and the belief over rooms.
 
 :class:`LoadedMap` is everything the localizer reads from the map database once at start-up
-(one detector's fingerprints stacked, the retrieval index, the places and the room graph).
+(one detector's fingerprints stacked with their rays, the retrieval index, the places and the
+room graph), built from the :class:`mapdb.records.MapSnapshot` that ``mapdb.loading`` reads.
 :class:`Localizer` turns a panorama into evidence (extraction, retrieval, verification) and
 keeps the Bayes filter over rooms. Both hold no open database handle.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import cv2
@@ -24,13 +26,12 @@ from localizer.belief import (
     StateThresholds,
     room_likelihood,
 )
-from localizer.evidence import EvidenceParams, QueryEvidence, place_evidence
+from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
 from localizer.features import extract_preset
-from localizer.fingerprint import Fingerprint
-from localizer.policy import MapPlace, PlaceSimilarity
+from localizer.policy import PlaceSimilarity
+from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
-from mapdb.database import MapDatabase
-from mapdb.loading import FingerprintTable, load_fingerprint_table, load_fingerprints
+from mapdb.records import Fingerprint, MapSnapshot, Place
 
 # Below this many places brute force verifies every place anyway: an index would not save time.
 INDEX_MIN_PLACES = 32
@@ -54,61 +55,64 @@ class LocalizerConfig:
     use_index: bool | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LoadedMap:
-    """One detector's view of the map: fingerprints (stacked and per place), places, graph."""
+    """One detector's view of the map, ready to localize against: the stacked fingerprints and
+    every stored keypoint's unit ray (computed once here), the places, rooms, room graph and
+    the retrieval index. Built from a :class:`mapdb.records.MapSnapshot`; holds no database."""
 
     path: Path
     table: FingerprintTable
-    fingerprints: Mapping[int, Fingerprint]
-    places: tuple[MapPlace, ...]
+    rays: np.ndarray
+    places: tuple[Place, ...]
     rooms: tuple[str, ...]
     edges: tuple[tuple[str, str], ...]
     index: PlaceIndex | None
 
     @classmethod
-    def from_database(
-        cls, path: Path | str, detector: str = "sift", use_index: bool | None = None
-    ) -> LoadedMap:
-        """Read the map at ``path`` (read-only). Raises ``ValueError`` if it has no place with
-        a ``detector`` fingerprint; database errors are :class:`mapdb.errors.MapDatabaseError`."""
-        path = Path(path)
-        with MapDatabase.open(path, create=False, readonly=True) as map_db:
-            table = load_fingerprint_table(map_db, detector)
-            stored = load_fingerprints(map_db, detector)
-            places = map_db.places()
-            rooms = tuple(room.name for room in map_db.rooms())
-            edges = tuple(map_db.edges())
-        if not len(table.place_ids):
-            raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
-        with_fingerprint = set(int(p) for p in table.place_ids)
-        map_places = tuple(
-            MapPlace(p.id, p.room, p.x_m, p.y_m) for p in places if p.id in with_fingerprint
-        )
+    def from_snapshot(cls, snapshot: MapSnapshot, use_index: bool | None = None) -> LoadedMap:
+        """Compute the rays and (``use_index``; ``None``: from ``INDEX_MIN_PLACES`` places) the
+        retrieval index of ``snapshot``."""
+        table = snapshot.table
         if use_index is None:
             use_index = len(table.place_ids) >= INDEX_MIN_PLACES
         return cls(
-            path=path,
+            path=snapshot.path,
             table=table,
-            fingerprints={s.place_id: s.fingerprint for s in stored},
-            places=map_places,
-            rooms=tuple(r for r in rooms if any(p.room == r for p in map_places)),
-            edges=edges,
+            rays=rays_from_table(table),
+            places=snapshot.places,
+            rooms=snapshot.rooms,
+            edges=snapshot.edges,
             index=PlaceIndex.build(table) if use_index else None,
         )
+
+    @cached_property
+    def _index_of(self) -> dict[int, int]:
+        return {int(place_id): i for i, place_id in enumerate(self.table.place_ids)}
 
     @property
     def image_size_px(self) -> tuple[int, int]:
         """``(width, height)`` of the map's panoramas (of its first place)."""
-        first = self.fingerprints[self.places[0].place_id]
-        return first.image_width_px, first.image_height_px
+        width, height = self.table.image_sizes_px[0]
+        return int(width), int(height)
 
-    def place(self, place_id: int) -> MapPlace:
+    def fingerprint(self, place_id: int) -> Fingerprint:
+        """The stored fingerprint of place ``place_id``; ``KeyError`` naming it if absent."""
+        return self.table.fingerprint(self.table_index(place_id))
+
+    def place(self, place_id: int) -> Place:
         """The place with id ``place_id``; ``KeyError`` naming it if it is not in the map."""
         for place in self.places:
-            if place.place_id == place_id:
+            if place.id == place_id:
                 return place
         raise KeyError(f"place {place_id} is not in the map {self.path}")
+
+    def table_index(self, place_id: int) -> int:
+        """The index of place ``place_id`` in :attr:`table`; ``KeyError`` naming it if absent."""
+        try:
+            return self._index_of[int(place_id)]
+        except KeyError:
+            raise KeyError(f"place {place_id} is not in the map {self.path}") from None
 
 
 @dataclass(frozen=True)
@@ -159,7 +163,12 @@ class Localizer:
         """Evidence for an already extracted fingerprint; ``exclude`` leaves one place out
         (leave-one-out evaluation of the map's own places)."""
         evidence = place_evidence(
-            fingerprint, self.map.table, self.config.evidence, self.map.index, exclude=exclude
+            fingerprint,
+            self.map.table,
+            self.config.evidence,
+            self.map.index,
+            exclude=exclude,
+            table_rays=self.map.rays,
         )
         timing = {"extraction": extraction_ms, **evidence.timing_ms}
         return Observation(fingerprint, evidence, timing)
@@ -230,29 +239,17 @@ class Localizer:
 
     def _pair_inliers(self, query_id: int, reference_id: int) -> int:
         if query_id == reference_id:
-            return self.map.fingerprints[query_id].n
+            return self.map.fingerprint(query_id).n
         key = (query_id, reference_id)
         if key not in self._similarity:
-            rows = np.flatnonzero(self.map.table.place_ids == reference_id)
-            evidence = place_evidence(
-                self.map.fingerprints[query_id],
-                _single_place(self.map.table, int(rows[0])),
+            query_rows = self.map.table.rows(self.map.table_index(query_id))
+            evidence = evaluate_place(
+                self.map.fingerprint(query_id),
+                self.map.rays[query_rows],
+                self.map.table,
+                self.map.rays,
+                self.map.table_index(reference_id),
                 self.config.evidence,
             )
-            self._similarity[key] = evidence.best.inliers if evidence.best else 0
+            self._similarity[key] = evidence.inliers
         return self._similarity[key]
-
-
-def _single_place(table: FingerprintTable, i: int) -> FingerprintTable:
-    """The table restricted to its ``i``-th place."""
-    start, stop = int(table.offsets[i]), int(table.offsets[i + 1])
-    return FingerprintTable(
-        detector=table.detector,
-        place_ids=table.place_ids[i : i + 1],
-        rooms=(table.rooms[i],),
-        offsets=np.array([0, stop - start]),
-        keypoints_xy=table.keypoints_xy[start:stop],
-        bearings_rad=table.bearings_rad[start:stop],
-        descriptors=table.descriptors[start:stop],
-        alv_xy=table.alv_xy[i : i + 1],
-    )

@@ -9,11 +9,13 @@ These rays are what the essential-matrix verification (:mod:`localizer.verificat
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localizer.fingerprint import Fingerprint
 from localizer.panorama import Cylinder, elevation_rad_from_row
+from mapdb.records import Fingerprint, FingerprintTable, ParamValue
 
 
 def rays_from_angles(bearing_rad: ArrayLike, elevation_rad: ArrayLike) -> np.ndarray:
@@ -26,16 +28,25 @@ def rays_from_angles(bearing_rad: ArrayLike, elevation_rad: ArrayLike) -> np.nda
     return np.stack([cos_e * np.cos(b), cos_e * np.sin(b), np.sin(e)], axis=1)
 
 
-def cylinder_of(fingerprint: Fingerprint) -> Cylinder:
-    """The cylinder a fingerprint was extracted on: its image size, and the ``focal_px`` and
+def cylinder_from_params(
+    width_px: int, height_px: int, params: Mapping[str, ParamValue]
+) -> Cylinder:
+    """The cylinder of a ``width_px`` x ``height_px`` panorama, with the ``focal_px`` and
     ``horizon_row_px`` recorded in its extraction ``params`` when present (else the defaults)."""
-    focal = fingerprint.params.get("focal_px")
-    horizon = fingerprint.params.get("horizon_row_px")
+    focal = params.get("focal_px")
+    horizon = params.get("horizon_row_px")
     return Cylinder(
-        fingerprint.image_width_px,
-        fingerprint.image_height_px,
+        int(width_px),
+        int(height_px),
         None if focal is None else float(focal),
         None if horizon is None else float(horizon),
+    )
+
+
+def cylinder_of(fingerprint: Fingerprint) -> Cylinder:
+    """The cylinder a fingerprint was extracted on (see :func:`cylinder_from_params`)."""
+    return cylinder_from_params(
+        fingerprint.image_width_px, fingerprint.image_height_px, fingerprint.params
     )
 
 
@@ -58,3 +69,15 @@ def rays_from_fingerprint(fp: Fingerprint, cylinder: Cylinder | None = None) -> 
             f"panorama is {fp.image_width_px}x{fp.image_height_px} px"
         )
     return rays_from_keypoints(fp.keypoints_xy, fp.bearings_rad, cylinder)
+
+
+def rays_from_table(table: FingerprintTable) -> np.ndarray:
+    """(N, 3) float64 unit rays of every stacked keypoint of ``table``, each place on its own
+    cylinder (its image size and extraction parameters); row ``r`` for the table's row ``r``."""
+    rays = np.zeros((len(table.bearings_rad), 3))
+    for i in range(len(table.place_ids)):
+        rows = table.rows(i)
+        width, height = table.image_sizes_px[i]
+        cylinder = cylinder_from_params(width, height, table.params[i])
+        rays[rows] = rays_from_keypoints(table.keypoints_xy[rows], table.bearings_rad[rows], cylinder)
+    return rays

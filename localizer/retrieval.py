@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from mapdb.loading import FingerprintTable
+from mapdb.records import FingerprintTable
 
 FLANN_INDEX_KDTREE = 1
 

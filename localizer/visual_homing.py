@@ -14,7 +14,7 @@ to go but is not metres). Two variants:
   inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
   over the inliers only, in both views (the same landmarks here and at the goal).
 
-The loop (:func:`drive_home`) is generic over :class:`robot.interface.Robot`: capture, extract,
+The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture, extract,
 step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
 ``[min_step_m, max_step_m]``, times a step scale that halves whenever the home vector reverses
 (it turned by more than ``reverse_deg`` between two steps, in the goal view's frame: an
@@ -43,11 +43,11 @@ import numpy as np
 from homing.alv import HomingError, alv_from_bearings, home_vector
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
 from localizer.features import extract_preset
-from localizer.fingerprint import Fingerprint
 from localizer.matching import match_descriptors
+from mapdb.records import Fingerprint
 
 if TYPE_CHECKING:  # the protocol only: localizer does not depend on a robot implementation
-    from robot.interface import Robot
+    from localizer.robot_protocol import Robot
 
 HomingVariant = Literal["thesis", "best"]
 VARIANTS: tuple[str, ...] = ("thesis", "best")

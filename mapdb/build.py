@@ -30,11 +30,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from localizer.fingerprint import Fingerprint
 from mapdb.database import MapDatabase
 from mapdb.dataset import ManifestEntry, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
-from mapdb.records import NewPlace
+from mapdb.records import Fingerprint, NewPlace
 
 Extractor = Callable[[Path], list[Fingerprint]]
 

@@ -17,15 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
+from mapdb.records import Fingerprint, ParamValue
 
 KEYPOINTS_DTYPE = np.dtype("<f4")
 BEARINGS_DTYPE = np.dtype("<f8")
 DESCRIPTORS_DTYPE = np.dtype("<f4")
 DESCRIPTOR_STORAGE = {"u1": np.dtype("u1"), "f4": DESCRIPTORS_DTYPE}
 """Stored descriptor element types by their ``descriptor_dtype`` code."""
-
-ParamValue = float | int | str | bool
 
 
 def alv_from_bearings(bearings_rad: np.ndarray) -> np.ndarray:

@@ -19,7 +19,6 @@ from urllib.parse import quote
 
 import sqlite_utils
 
-from localizer.fingerprint import Fingerprint
 from mapdb.codec import fingerprint_to_row
 from mapdb.errors import (
     DuplicatePlaceError,
@@ -31,7 +30,7 @@ from mapdb.errors import (
     UnknownRoomError,
     translate_sqlite_error,
 )
-from mapdb.records import MapInfo, NewPlace, Place, RoomSummary
+from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary
 from mapdb.schema import MIGRATIONS, SCHEMA_VERSION, Migration, migrate, read_schema_version
 
 _SELECT_PLACES = (

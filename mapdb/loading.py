@@ -7,16 +7,17 @@ Two shapes for the localizer's start-up:
 - :func:`load_fingerprint_table`: one detector stacked into contiguous arrays (all descriptors
   in one ``(N, d)`` matrix, with per-place offsets), built from one ``b"".join`` per column;
   ready for a single nearest-neighbour index over the whole map.
+- :func:`load_snapshot`: that table with the places, rooms and room graph, read once at a
+  localizer's start-up.
 """
 
 from __future__ import annotations
 
 import sqlite3
-from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
 from mapdb.codec import (
     BEARINGS_DTYPE,
     DESCRIPTOR_STORAGE,
@@ -28,6 +29,7 @@ from mapdb.codec import (
 )
 from mapdb.database import MapDatabase
 from mapdb.errors import translate_sqlite_error
+from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
 
 _SELECT = (
     "SELECT f.place_id, r.name, f.detector, p.image_width_px, p.image_height_px, "
@@ -35,40 +37,6 @@ _SELECT = (
     "f.descriptors, f.alv_x, f.alv_y, f.params_json "
     "FROM fingerprints f JOIN places p ON p.id = f.place_id JOIN rooms r ON r.id = p.room_id"
 )
-
-
-@dataclass(frozen=True)
-class StoredFingerprint:
-    """A fingerprint with the place and room it belongs to and its stored ALV (robot frame)."""
-
-    place_id: int
-    room: str
-    alv_xy: tuple[float, float]
-    fingerprint: Fingerprint
-
-
-@dataclass(frozen=True)
-class FingerprintTable:
-    """All fingerprints of one detector, stacked; place ``i`` owns rows ``offsets[i]:offsets[i+1]``.
-
-    ``keypoints_xy`` (N, 2) float32 px, ``bearings_rad`` (N,) float64, ``descriptors`` (N, d)
-    float32, ``alv_xy`` (m, 2) float64, ``place_ids`` (m,) int64, ``rooms`` one name per place,
-    ``keypoint_place_index`` (N,) index into ``place_ids`` of each row.
-    """
-
-    detector: str
-    place_ids: np.ndarray
-    rooms: tuple[str, ...]
-    offsets: np.ndarray
-    keypoints_xy: np.ndarray
-    bearings_rad: np.ndarray
-    descriptors: np.ndarray
-    alv_xy: np.ndarray
-
-    @property
-    def keypoint_place_index(self) -> np.ndarray:
-        """For each stacked row, the index of its place in ``place_ids``."""
-        return np.repeat(np.arange(len(self.place_ids)), np.diff(self.offsets))
 
 
 def _query(map_db: MapDatabase, detector: str | None) -> list[tuple]:
@@ -113,6 +81,7 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
     descriptors have differing dimensions.
     """
     rows = _query(map_db, detector)
+    params_of = ParamsCache()
     if not rows:
         columns: list[tuple] = [()] * 14
     else:
@@ -134,4 +103,26 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
         bearings_rad=np.frombuffer(b"".join(columns[8]), BEARINGS_DTYPE),
         descriptors=_stack_descriptors(columns[9], columns[10], columns[5], dim, total),
         alv_xy=np.array([columns[11], columns[12]], dtype=np.float64).T.reshape(len(rows), 2),
+        image_sizes_px=np.array([columns[3], columns[4]], dtype=np.int64).T.reshape(len(rows), 2),
+        params=tuple(params_of(text) for text in columns[13]),
     )
+
+
+def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
+    """Read what a localizer needs from the map at ``path`` (read-only, then closed).
+
+    Raises ``ValueError`` if the map has no place with a ``detector`` fingerprint; database
+    errors are :class:`mapdb.errors.MapDatabaseError`.
+    """
+    path = Path(path)
+    with MapDatabase.open(path, create=False, readonly=True) as map_db:
+        table = load_fingerprint_table(map_db, detector)
+        places = map_db.places()
+        rooms = tuple(room.name for room in map_db.rooms())
+        edges = tuple(map_db.edges())
+    if not len(table.place_ids):
+        raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
+    with_fingerprint = {int(p) for p in table.place_ids}
+    kept = tuple(p for p in places if p.id in with_fingerprint)
+    kept_rooms = tuple(r for r in rooms if any(p.room == r for p in kept))
+    return MapSnapshot(path, table, kept, kept_rooms, edges)

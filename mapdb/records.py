@@ -1,4 +1,5 @@
-"""Plain dataclasses for what goes into and comes out of the map database.
+"""Plain dataclasses for what goes into and comes out of the map database: places, rooms and
+the fingerprints of panoramas (pure: numpy only, no SQLite), shared by every layer above.
 
 Positions are in metres and headings in degrees, in the metric frame of the place's own room
 (REP-103: x forward, y left, CCW positive); ``None`` means unknown. Times are ISO-8601 UTC text.
@@ -6,9 +7,15 @@ Positions are in metres and headings in degrees, in the metric frame of the plac
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+
+ParamValue = float | int | str | bool
+"""A value of a fingerprint's extraction parameters."""
 
 
 @dataclass(frozen=True)
@@ -79,3 +86,170 @@ class MapInfo:
         data["edges"] = [list(edge) for edge in self.edges]
         data["n_places"] = self.n_places
         return data
+
+
+@dataclass(frozen=True)
+class Fingerprint:
+    """Features of one panorama found by one detector.
+
+    ``keypoints_xy`` are OpenCV pixel coordinates (x right, y down; pixel centres at integers) on
+    the cylindrical panorama of ``image_width_px`` x ``image_height_px``. ``bearings_rad`` are
+    robot-frame azimuths (REP-103: counter-clockwise positive, 0 along the heading), which for a
+    cylindrical panorama is ``-2*pi*x/W`` wrapped to (-pi, pi]. ``descriptors`` are float32 rows
+    (128 values for SIFT). ``params`` records how they were extracted (for the map database).
+    """
+
+    detector: str
+    image_width_px: int
+    image_height_px: int
+    keypoints_xy: np.ndarray
+    bearings_rad: np.ndarray
+    descriptors: np.ndarray
+    params: Mapping[str, ParamValue] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.bearings_rad)
+        if self.keypoints_xy.shape != (n, 2):
+            raise ValueError(
+                f"keypoints_xy must have shape ({n}, 2) to match {n} bearings, "
+                f"got {self.keypoints_xy.shape}"
+            )
+        if len(self.descriptors) != n:
+            raise ValueError(f"descriptors has {len(self.descriptors)} rows for {n} bearings")
+
+    @property
+    def n(self) -> int:
+        """Number of keypoints."""
+        return len(self.bearings_rad)
+
+    @classmethod
+    def empty(
+        cls,
+        detector: str,
+        image_width_px: int,
+        image_height_px: int,
+        descriptor_size: int = 128,
+        params: Mapping[str, ParamValue] | None = None,
+    ) -> Fingerprint:
+        """A fingerprint with no keypoints (e.g. a blank wall): 0 rows, float32 descriptors."""
+        return cls(
+            detector=detector,
+            image_width_px=image_width_px,
+            image_height_px=image_height_px,
+            keypoints_xy=np.zeros((0, 2), dtype=np.float64),
+            bearings_rad=np.zeros(0, dtype=np.float64),
+            descriptors=np.zeros((0, descriptor_size), dtype=np.float32),
+            params=dict(params or {}),
+        )
+
+    def select(self, mask: np.ndarray) -> Fingerprint:
+        """The keypoints where boolean ``mask`` (or an index array) selects, other fields kept."""
+        mask = np.asarray(mask)
+        if mask.dtype == bool and mask.shape != (self.n,):
+            raise ValueError(f"boolean mask must have shape ({self.n},), got {mask.shape}")
+        return replace(
+            self,
+            keypoints_xy=self.keypoints_xy[mask],
+            bearings_rad=self.bearings_rad[mask],
+            descriptors=self.descriptors[mask],
+        )
+
+
+@dataclass(frozen=True)
+class StoredFingerprint:
+    """A fingerprint with the place and room it belongs to and its stored ALV (robot frame)."""
+
+    place_id: int
+    room: str
+    alv_xy: tuple[float, float]
+    fingerprint: Fingerprint
+
+
+@dataclass(frozen=True)
+class FingerprintTable:
+    """All fingerprints of one detector, stacked; place ``i`` owns rows ``offsets[i]:offsets[i+1]``.
+
+    ``keypoints_xy`` (N, 2) float32 px, ``bearings_rad`` (N,) float64, ``descriptors`` (N, d)
+    float32, ``alv_xy`` (m, 2) float64, ``place_ids`` (m,) int64, ``rooms`` one name per place,
+    ``image_sizes_px`` (m, 2) int64 ``(width, height)`` of each place's panorama, ``params`` each
+    place's extraction parameters, ``keypoint_place_index`` (N,) index into ``place_ids`` of each
+    row.
+    """
+
+    detector: str
+    place_ids: np.ndarray
+    rooms: tuple[str, ...]
+    offsets: np.ndarray
+    keypoints_xy: np.ndarray
+    bearings_rad: np.ndarray
+    descriptors: np.ndarray
+    alv_xy: np.ndarray
+    image_sizes_px: np.ndarray
+    params: tuple[Mapping[str, ParamValue], ...]
+
+    def __post_init__(self) -> None:
+        m = len(self.place_ids)
+        if len(self.offsets) != m + 1 or len(self.rooms) != m or len(self.params) != m:
+            raise ValueError(
+                f"{m} places need {m + 1} offsets, {m} rooms and {m} params, got "
+                f"{len(self.offsets)}, {len(self.rooms)} and {len(self.params)}"
+            )
+        if np.shape(self.image_sizes_px) != (m, 2):
+            raise ValueError(
+                f"image_sizes_px must have shape ({m}, 2), got {np.shape(self.image_sizes_px)}"
+            )
+
+    @property
+    def keypoint_place_index(self) -> np.ndarray:
+        """For each stacked row, the index of its place in ``place_ids``."""
+        return np.repeat(np.arange(len(self.place_ids)), np.diff(self.offsets))
+
+    def rows(self, i: int) -> slice:
+        """The stacked rows of the place at index ``i``."""
+        return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
+
+    def fingerprint(self, i: int) -> Fingerprint:
+        """The fingerprint of the place at index ``i`` (views into the stacked arrays)."""
+        rows = self.rows(i)
+        width, height = (int(v) for v in self.image_sizes_px[i])
+        return Fingerprint(
+            detector=self.detector,
+            image_width_px=width,
+            image_height_px=height,
+            keypoints_xy=self.keypoints_xy[rows],
+            bearings_rad=self.bearings_rad[rows],
+            descriptors=self.descriptors[rows],
+            params=self.params[i],
+        )
+
+    def subset(self, places: Sequence[int] | np.ndarray) -> FingerprintTable:
+        """The table restricted to the place indices ``places``, in that order."""
+        indices = np.asarray(places, dtype=np.int64).reshape(-1)
+        spans = [np.arange(self.offsets[i], self.offsets[i + 1]) for i in indices]
+        rows = np.concatenate(spans) if spans else np.zeros(0, dtype=np.int64)
+        offsets = np.zeros(len(indices) + 1, dtype=np.int64)
+        np.cumsum(np.diff(self.offsets)[indices], out=offsets[1:])
+        return FingerprintTable(
+            detector=self.detector,
+            place_ids=self.place_ids[indices],
+            rooms=tuple(self.rooms[i] for i in indices),
+            offsets=offsets,
+            keypoints_xy=self.keypoints_xy[rows],
+            bearings_rad=self.bearings_rad[rows],
+            descriptors=np.ascontiguousarray(self.descriptors[rows]),
+            alv_xy=self.alv_xy[indices],
+            image_sizes_px=self.image_sizes_px[indices],
+            params=tuple(self.params[i] for i in indices),
+        )
+
+
+@dataclass(frozen=True)
+class MapSnapshot:
+    """What a localizer reads from a map once at start-up: one detector's fingerprints stacked,
+    the places that have one, the rooms that have such places, and the room graph."""
+
+    path: Path
+    table: FingerprintTable
+    places: tuple[Place, ...]
+    rooms: tuple[str, ...]
+    edges: tuple[tuple[str, str], ...]

@@ -25,8 +25,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from localizer.robot_protocol import Capture, MoveResult, Odometry
 from robot.conditions import Condition, get_condition, world_under
-from robot.interface import Capture, MoveResult, Odometry
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
 from robot.world import WALL_SIDES, Pose2D, Room, World
@@ -195,7 +195,7 @@ def random_free_pose(
 
 
 class SimulatedRobot:
-    """A :class:`robot.interface.Robot` in a rendered world (see the module docstring).
+    """A :class:`localizer.robot_protocol.Robot` in a rendered world (see the module docstring).
 
     ``world`` is the world without the condition's objects; they are added here (seeded by
     ``seed``, as ``toploc dataset render`` does) and block motion. ``pose`` is the true starting

@@ -2,7 +2,7 @@
 
 :func:`start_service` opens the session and declares the map node, the localizer node and,
 when a robot object is given (the simulated robot here), its robot node. The localizer always
-drives the robot through the bus (:class:`robot.node.RemoteRobot`), so a real base running its
+drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base running its
 own robot node elsewhere is used the same way.
 """
 
@@ -15,13 +15,14 @@ from pathlib import Path
 
 import zenoh
 
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
-from localizer.node import LocalizerNode
-from localizer.service import LocalizationRunner
-from mapdb.node import MapNode
-from robot.interface import Robot
-from robot.node import RemoteRobot, RobotNode
+from localizer.localizer import Localizer, LocalizerConfig
+from localizer.robot_protocol import Robot
 from toploc.bus import BusConfig, open_session
+from toploc.maps import load_map
+from toploc.nodes.localizer import LocalizerNode
+from toploc.nodes.mapdb import MapNode
+from toploc.nodes.robot import RemoteRobot, RobotNode
+from toploc.runner import LocalizationRunner
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,7 @@ def start_service(
     """Serve the map at ``db_path`` for robot ``config.robot_id``; everything is undeclared and
     the session closed on exit (an unclosed session keeps the process alive)."""
     localizer_config = localizer_config or LocalizerConfig()
-    loaded = LoadedMap.from_database(db_path, localizer_config.detector)
+    loaded = load_map(db_path, localizer_config.detector)
     localizer = Localizer(loaded, localizer_config)
     robot_id = config.robot_id
     with ExitStack() as stack:

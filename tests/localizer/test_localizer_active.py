@@ -8,7 +8,8 @@ import pytest
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
-from robot.interface import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Odometry
+from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
@@ -18,7 +19,7 @@ CAMERA = PanoramaCamera(512, 96)
 
 @pytest.fixture(scope="module")
 def localizer(building_map) -> Localizer:
-    return Localizer(LoadedMap.from_database(building_map[0]))
+    return Localizer(LoadedMap.from_snapshot(load_snapshot(building_map[0])))
 
 
 @pytest.mark.parametrize("policy", ["separating", "most-likely"])

@@ -10,11 +10,12 @@ import pytest
 
 from localizer.evidence import EvidenceParams, PlaceEvidence, QueryEvidence, place_evidence
 from localizer.features import extract_preset
-from localizer.fingerprint import Fingerprint
 from localizer.panorama import wrap_angle_rad
 from localizer.rays import rays_from_fingerprint
 from localizer.verification import verify
-from mapdb import FingerprintTable, MapDatabase, NewPlace, load_fingerprint_table
+from mapdb.database import MapDatabase
+from mapdb.loading import load_fingerprint_table
+from mapdb.records import Fingerprint, FingerprintTable, NewPlace
 from robot.conditions import get_condition
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene

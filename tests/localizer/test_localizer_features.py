@@ -12,8 +12,8 @@ from localizer.features import (
     pad_circular,
     params_from_preset,
 )
-from localizer.fingerprint import Fingerprint
 from localizer.panorama import Cylinder, elevation_rad_from_row, wrap_angle_rad
+from mapdb.records import Fingerprint
 
 DETECTORS = ["sift", "mser"]
 

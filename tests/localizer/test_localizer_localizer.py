@@ -9,6 +9,7 @@ import pytest
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer, to_grey
 from mapdb.database import MapDatabase
+from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
@@ -20,7 +21,7 @@ CAMERA = PanoramaCamera(512, 96)
 @pytest.fixture(scope="module")
 def localizer(building_map) -> Localizer:
     db_path, _ = building_map
-    return Localizer(LoadedMap.from_database(db_path))
+    return Localizer(LoadedMap.from_snapshot(load_snapshot(db_path)))
 
 
 def capture_in(room: str, x_m: float, y_m: float, heading_deg: float) -> object:
@@ -64,7 +65,7 @@ def test_reset_with_a_prior_and_prediction_along_the_graph(localizer: Localizer)
 
 def test_leaving_a_place_out_removes_it_from_the_evidence(localizer: Localizer):
     place = localizer.map.places[0]
-    fingerprint = localizer.map.fingerprints[place.place_id]
+    fingerprint = localizer.map.fingerprint(place.id)
     kept = localizer.observe_fingerprint(fingerprint, exclude=place.place_id)
     assert all(e.place_id != place.place_id for e in kept.evidence.places)
     full = localizer.observe_fingerprint(fingerprint)
@@ -81,13 +82,13 @@ def test_a_blank_panorama_leaves_the_localizer_lost(localizer: Localizer):
 def test_a_map_without_the_detector_is_refused_by_name(building_map):
     db_path, _ = building_map
     with pytest.raises(ValueError, match="no place with a 'mser' fingerprint"):
-        LoadedMap.from_database(db_path, detector="mser")
+        LoadedMap.from_snapshot(load_snapshot(db_path, detector="mser"))
 
 
 def test_an_empty_map_is_refused(tmp_path):
     MapDatabase.open(tmp_path / "empty.db").close()
     with pytest.raises(ValueError, match=r"empty\.db has no place"):
-        LoadedMap.from_database(tmp_path / "empty.db")
+        LoadedMap.from_snapshot(load_snapshot(tmp_path / "empty.db"))
 
 
 def test_images_of_other_shapes_are_refused():

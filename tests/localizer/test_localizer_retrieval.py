@@ -10,9 +10,10 @@ import pytest
 
 from localizer.evidence import EvidenceParams, place_evidence
 from localizer.features import extract_preset
-from localizer.fingerprint import Fingerprint
 from localizer.retrieval import IndexParams, PlaceIndex
-from mapdb import FingerprintTable, MapDatabase, NewPlace, load_fingerprint_table
+from mapdb.database import MapDatabase
+from mapdb.loading import load_fingerprint_table
+from mapdb.records import Fingerprint, FingerprintTable, NewPlace
 from robot.conditions import get_condition
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene

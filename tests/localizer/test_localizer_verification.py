@@ -7,7 +7,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from localizer.fingerprint import Fingerprint
 from localizer.panorama import Cylinder, wrap_angle_rad
 from localizer.rays import rays_from_angles, rays_from_fingerprint
 from localizer.verification import (
@@ -17,6 +16,7 @@ from localizer.verification import (
     verify,
     yaw_from_rotation,
 )
+from mapdb.records import Fingerprint
 
 
 def rz(yaw_rad: float) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from homing.alv import HomingError
-from localizer.fingerprint import Fingerprint
+from localizer.robot_protocol import Capture, MoveResult, Odometry
 from localizer.visual_homing import (
     HomingParams,
     StepParams,
@@ -17,7 +17,7 @@ from localizer.visual_homing import (
     grey_extractor,
     home_step,
 )
-from robot.interface import Capture, MoveResult, Odometry
+from mapdb.records import Fingerprint
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D

@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
+from mapdb.records import Fingerprint
 
 N_KEYPOINTS = 24
 DELAY_ENV = "TOPLOC_FAKE_EXTRACT_DELAY_S"

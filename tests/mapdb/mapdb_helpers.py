@@ -8,8 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from localizer.fingerprint import Fingerprint
-from mapdb.records import NewPlace
+from mapdb.records import Fingerprint, NewPlace
 
 FAKE_EXTRACTOR = "mapdb_fake_extractor:fake_extract"
 SLOW_EXTRACTOR = "mapdb_fake_extractor:slow_extract"

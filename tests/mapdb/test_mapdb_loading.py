@@ -8,7 +8,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from mapdb_helpers import make_fingerprint, new_place
 
-from localizer.fingerprint import Fingerprint
 from mapdb.codec import (
     ParamsCache,
     alv_from_bearings,
@@ -17,6 +16,7 @@ from mapdb.codec import (
 )
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table, load_fingerprints
+from mapdb.records import Fingerprint
 
 
 def assert_same_fingerprint(loaded: Fingerprint, original: Fingerprint) -> None:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robot.interface import Robot
+from localizer.robot_protocol import Robot
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, Obstacles, SimulatedRobot, random_free_pose
 from robot.world import Pose2D

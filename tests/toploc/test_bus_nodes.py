@@ -12,15 +12,14 @@ import pytest
 import zenoh
 from click.testing import CliRunner
 
-from localizer.fingerprint import Fingerprint
-from localizer.node import LocalizerClient, LocalizerNode
+from localizer.robot_protocol import Capture, MoveResult, Odometry
 from mapdb.database import MapDatabase
-from mapdb.node import MapNode
-from mapdb.records import NewPlace
-from robot.interface import Capture, MoveResult, Odometry
-from robot.node import RemoteRobot, RobotNode, decode_png
+from mapdb.records import Fingerprint, NewPlace
 from toploc import bus
 from toploc.cli import main
+from toploc.nodes.localizer import LocalizerClient, LocalizerNode
+from toploc.nodes.mapdb import MapNode
+from toploc.nodes.robot import RemoteRobot, RobotNode, decode_png
 
 ROBOT_ID = "r1"
 

@@ -67,7 +67,7 @@ def belief(
     timeout_s: float,
 ) -> None:
     """Print the belief of a running toploc service: probability per room, state, best place."""
-    from localizer.node import LOCALIZE_TIMEOUT_S, LocalizerClient
+    from toploc.nodes.localizer import LOCALIZE_TIMEOUT_S, LocalizerClient
 
     try:
         cfg = bus.BusConfig(robot_id=robot_id, listen=(), connect=endpoints)

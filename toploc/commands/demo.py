@@ -13,12 +13,12 @@ from typing import Any
 
 import click
 
-from localizer.node import LocalizerClient
 from localizer.policy import POLICIES
 from robot.worlds import make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError, open_session
+from toploc.maps import ensure_world_map, kidnapped_robot
+from toploc.nodes.localizer import LocalizerClient
 from toploc.service import start_service
-from toploc.worldmap import ensure_world_map, kidnapped_robot
 
 WORLD = "building"
 LOOK_ALIKE = ("office_a", "office_b")

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from localizer.homing_eval import COMPASSES, evaluate_alignment
 from toploc.commands.eval_homing import evaluation_errors, extraction_options, load_and_extract
+from toploc.evaluation.homing import COMPASSES, evaluate_alignment
 
 
 @click.command("align")

@@ -17,7 +17,9 @@ import click
 import numpy as np
 
 from localizer.features import DETECTORS, ExtractionParams
-from localizer.homing_eval import (
+from localizer.panorama_io import PanoramaError
+from mapdb.errors import MapDatabaseError
+from toploc.evaluation.homing import (
     BEST_METHOD,
     METHODS,
     EvaluationError,
@@ -27,8 +29,6 @@ from localizer.homing_eval import (
     extract_fingerprints,
     load_places,
 )
-from localizer.panorama_io import PanoramaError
-from mapdb.errors import MapDatabaseError
 
 
 @contextmanager

@@ -10,7 +10,6 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from localizer.localization_eval import QueryOutcome, format_confusion, score_localization
 from localizer.localizer import Localizer
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import read_manifest
@@ -21,6 +20,7 @@ from toploc.commands.localize import (
     load_localizer,
     localizer_errors,
 )
+from toploc.evaluation.localization import QueryOutcome, format_confusion, score_localization
 
 
 def _dataset_outcomes(localizer: Localizer, dataset: Path, progress: bool) -> list[QueryOutcome]:
@@ -40,7 +40,7 @@ def _leave_one_out_outcomes(localizer: Localizer, progress: bool) -> list[QueryO
     outcomes = []
     for place in tqdm(localizer.map.places, desc="leave-one-out", disable=not progress):
         localizer.reset()
-        fingerprint = localizer.map.fingerprints[place.place_id]
+        fingerprint = localizer.map.fingerprint(place.id)
         observation = localizer.observe_fingerprint(fingerprint, exclude=place.place_id)
         belief = localizer.update(observation)
         outcomes.append(

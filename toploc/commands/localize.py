@@ -14,9 +14,10 @@ from pathlib import Path
 import click
 
 from localizer.belief import RoomBelief
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig, Observation
+from localizer.localizer import Localizer, LocalizerConfig, Observation
 from localizer.panorama_io import PanoramaError, read_panorama
 from mapdb.errors import MapDatabaseError
+from toploc.maps import load_map
 
 
 @contextmanager
@@ -32,7 +33,7 @@ def load_localizer(db_path: Path, detector: str, index: bool | None) -> Localize
     """The localizer on the map at ``db_path`` with the ``detector`` fingerprints."""
     if not db_path.is_file():
         raise click.ClickException(f"map database {db_path} does not exist")
-    loaded = LoadedMap.from_database(db_path, detector, use_index=index)
+    loaded = load_map(db_path, detector, use_index=index)
     return Localizer(loaded, LocalizerConfig(detector=detector))
 
 

@@ -24,13 +24,12 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from localizer.fingerprint import Fingerprint
 from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import MapInfo
+from mapdb.records import Fingerprint, MapInfo
 
 EXTRACTOR_ENV = "TOPLOC_MAP_EXTRACTOR"
 DEFAULT_DETECTORS = "sift,mser"

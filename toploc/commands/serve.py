@@ -13,8 +13,8 @@ import click
 from localizer.policy import POLICIES
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
+from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.service import start_service
-from toploc.worldmap import ensure_world_map, kidnapped_robot
 
 
 @click.command("serve")

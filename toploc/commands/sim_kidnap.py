@@ -16,11 +16,11 @@ from tqdm import tqdm
 
 from localizer.active import ActiveParams, ActiveResult, localize_actively
 from localizer.belief import LocalizationState
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.localizer import Localizer, LocalizerConfig
 from localizer.policy import POLICIES
 from robot.conditions import CONDITIONS
 from robot.worlds import make_world
-from toploc.worldmap import ensure_world_map, kidnapped_robot
+from toploc.maps import ensure_world_map, kidnapped_robot, load_map
 
 # The rooms a kidnapped robot is put in, per world: its look-alike rooms.
 KIDNAP_ROOMS = {"building": ("office_a", "office_b")}
@@ -123,7 +123,7 @@ def kidnap(
     success (localized in the right room); then the totals.
     """
     db = db_path or ensure_world_map(world)
-    localizer = Localizer(LoadedMap.from_database(db), LocalizerConfig())
+    localizer = Localizer(load_map(db), LocalizerConfig())
     scene_world = make_world(world)
     params = ActiveParams(max_targets=max_targets)
     rooms = KIDNAP_ROOMS[world]

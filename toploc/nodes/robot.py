@@ -1,4 +1,4 @@
-"""The robot on the Zenoh bus: :class:`RobotNode` serves a :class:`~robot.interface.Robot`,
+"""The robot on the Zenoh bus: :class:`RobotNode` serves a :class:`~localizer.robot_protocol.Robot`,
 :class:`RemoteRobot` is a Robot that talks to such a node.
 
 Keys under ``toploc/<robot_id>/``:
@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 import zenoh
 
-from robot.interface import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 from toploc import bus
 
 NODE_NAME = "robot"
@@ -167,7 +167,7 @@ class RobotNode:
 
 
 class RemoteRobot:
-    """A :class:`~robot.interface.Robot` whose calls go over the bus to a :class:`RobotNode`.
+    """A :class:`~localizer.robot_protocol.Robot` whose calls go over the bus to a :class:`RobotNode`.
 
     ``timeout_s`` bounds capture and odometry queries, ``move_timeout_s`` a move (it replies
     when done). Every call raises :class:`~toploc.bus.BusTimeout` if the node does not answer,

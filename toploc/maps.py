@@ -1,6 +1,8 @@
-"""Maps of the rendered worlds, made on first use and kept in a cache folder.
+"""Maps for the shell: a database file loaded for the localizer, and the maps of the rendered
+worlds, made on first use and kept in a cache folder.
 
-The demo and ``toploc sim kidnap`` need a map of a preset world: the world's dataset is
+:func:`load_map` reads a map once (``mapdb.loading``) and prepares it for the localizer (rays,
+retrieval index). The demo and ``toploc sim kidnap`` need a map of a preset world: the world's dataset is
 rendered (``robot.dataset``) and built into a SQLite map (``mapdb.build``) once, then reused.
 The cache is ``$TOPLOC_HOME`` or ``~/.cache/toploc``; a half-made map (an interrupted first
 run) is completed on the next, since rendering and building are both resumable from scratch.
@@ -11,10 +13,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import read_edges, read_manifest
 from mapdb.graph import connect_known_rooms
+from mapdb.loading import load_snapshot
 from robot.dataset import MANIFEST_NAME, render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
@@ -22,6 +26,13 @@ from robot.world import World
 from toploc.commands.map import resolve_extractor
 
 HOME_ENV = "TOPLOC_HOME"
+
+
+def load_map(db_path: Path | str, detector: str = "sift", use_index: bool | None = None) -> LoadedMap:
+    """The map at ``db_path`` ready for a :class:`localizer.localizer.Localizer` (read once, the
+    database closed again). Raises ``ValueError`` if it has no ``detector`` fingerprint and
+    :class:`mapdb.errors.MapDatabaseError` for a missing, locked or damaged file."""
+    return LoadedMap.from_snapshot(load_snapshot(db_path, detector), use_index)
 
 
 def kidnapped_robot(

@@ -1,6 +1,6 @@
 """The localization service: one localizer, one robot, a belief that clients can ask for.
 
-:class:`LocalizationRunner` is what :class:`localizer.node.LocalizerNode` serves on the bus
+:class:`LocalizationRunner` is what :class:`toploc.nodes.localizer.LocalizerNode` serves on the bus
 (it knows nothing of Zenoh). Zenoh answers each query on its own thread, so the runner is
 thread-safe: one localization at a time (a second waits), ``belief()`` always answers at once
 with the latest snapshot, and ``reset()`` during a run is refused with a clear error rather
@@ -17,7 +17,7 @@ from typing import Any
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import Localizer
-from robot.interface import Robot
+from localizer.robot_protocol import Robot
 
 RESET_WAIT_S = 1.0
 

@@ -12,14 +12,15 @@ import pytest
 from click.testing import CliRunner
 
 from localizer.localizer import LoadedMap, Localizer
-from localizer.node import LocalizerClient, check_belief
-from localizer.service import LocalizationRunner
+from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
 from toploc.cli import main
+from toploc.nodes.localizer import LocalizerClient, check_belief
+from toploc.runner import LocalizationRunner
 from toploc.service import start_service
 
 CAMERA = PanoramaCamera(512, 96)
@@ -57,7 +58,7 @@ class GatedRobot:
 
 @pytest.fixture(scope="module")
 def loaded(building_map) -> LoadedMap:
-    return LoadedMap.from_database(building_map[0])
+    return LoadedMap.from_snapshot(load_snapshot(building_map[0]))
 
 
 def test_a_passive_localize_publishes_a_belief_in_the_bus_format(loaded):

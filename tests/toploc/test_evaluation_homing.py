@@ -15,7 +15,11 @@ import pytest
 from click.testing import CliRunner
 
 from localizer.features import ExtractionParams
-from localizer.homing_eval import (
+from localizer.panorama_io import PanoramaError
+from robot.dataset import render_dataset
+from robot.render import PanoramaCamera
+from toploc.cli import main
+from toploc.evaluation.homing import (
     COMPASSES,
     EvaluationError,
     evaluate_alignment,
@@ -24,10 +28,6 @@ from localizer.homing_eval import (
     load_places,
     same_room_pairs,
 )
-from localizer.panorama_io import PanoramaError
-from robot.dataset import render_dataset
-from robot.render import PanoramaCamera
-from toploc.cli import main
 
 
 @pytest.fixture(scope="module")

@@ -48,10 +48,10 @@ from homing.evaluation import (
     wedge_vote_direction_rad,
 )
 from localizer.features import ExtractionParams, extract
-from localizer.fingerprint import Fingerprint
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import ManifestEntry, read_manifest
+from mapdb.records import Fingerprint
 
 METHODS: tuple[str, ...] = ("thesis", "best", "alv-compass", "matched-alv", "matched-vote")
 BEST_METHOD = "matched-alv"

@@ -2,7 +2,7 @@
 
 import pytest
 
-from localizer.localization_eval import QueryOutcome, format_confusion, score_localization
+from toploc.evaluation.localization import QueryOutcome, format_confusion, score_localization
 
 CONFUSION = {"hall": {"hall": 2, "kitchen": 0}, "kitchen": {"hall": 1, "kitchen": 1}}
 
