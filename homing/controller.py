@@ -149,7 +149,7 @@ def best_controller(
     homes[~seen] = np.nan
     _learn_frames(extra, homes)
     settled = _settledness(extra)
-    pick = ((settled[:, 1] > settled[:, 0]) & (extra["steps"][:, 1] >= MIN_EVIDENCE_STEPS))
+    pick = (settled[:, 1] > settled[:, 0]) & (extra["steps"][:, 1] >= MIN_EVIDENCE_STEPS)
     rows = np.arange(runs)
     home = homes[rows, pick.astype(int)]
     previous = extra["home"][rows, pick.astype(int)]

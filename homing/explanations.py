@@ -132,12 +132,10 @@ def explain_row(ours: Mapping[str, Any], paper: Mapping[str, Any]) -> Explanatio
     median_off = high and medians_far(paper.get("iterations_median"), ours["iterations_median"])
     if not (success_off or median_off):
         return None
-    differs_in = "both" if success_off and median_off else "success" if success_off else (
-        "iterations"
+    differs_in = (
+        "both" if success_off and median_off else "success" if success_off else ("iterations")
     )
-    p = fisher_p_value(
-        round(our_rate * runs), runs, round(paper_rate * paper_runs), paper_runs
-    )
+    p = fisher_p_value(round(our_rate * runs), runs, round(paper_rate * paper_runs), paper_runs)
     return Explanation(
         ours["experiment"],
         int(ours["world"]),

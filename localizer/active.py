@@ -1,8 +1,8 @@
 """Active disambiguation (thesis chapter 6): while the belief is ambiguous, drive to a telling
 place by visual homing, look again there, and update the belief.
 
-Works with any :class:`localizer.robot_protocol.Robot`; the policy that picks where to go is pluggable
-(:mod:`localizer.policy`).
+Works with any :class:`localizer.robot_protocol.Robot`; the policy that picks where to go is
+pluggable (:mod:`localizer.policy`).
 """
 
 from __future__ import annotations

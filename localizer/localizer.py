@@ -31,7 +31,7 @@ from localizer.features import extract_preset
 from localizer.policy import PlaceSimilarity
 from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
-from mapdb.records import Fingerprint, MapSnapshot, Place
+from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
 
 # Below this many places brute force verifies every place anyway: an index would not save time.
 INDEX_MIN_PLACES = 32
@@ -220,9 +220,7 @@ class Localizer:
         observation = self.observe(image)
         return self.update(observation), observation
 
-    def similarity(
-        self, rows: tuple[int, ...], columns: tuple[int, ...] = ()
-    ) -> PlaceSimilarity:
+    def similarity(self, rows: tuple[int, ...], columns: tuple[int, ...] = ()) -> PlaceSimilarity:
         """Verified inliers between stored views, for the separating policy.
 
         The matrix covers ``rows`` and ``columns``; only the entries a policy reads are matched:

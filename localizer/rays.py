@@ -79,5 +79,7 @@ def rays_from_table(table: FingerprintTable) -> np.ndarray:
         rows = table.rows(i)
         width, height = table.image_sizes_px[i]
         cylinder = cylinder_from_params(width, height, table.params[i])
-        rays[rows] = rays_from_keypoints(table.keypoints_xy[rows], table.bearings_rad[rows], cylinder)
+        rays[rows] = rays_from_keypoints(
+            table.keypoints_xy[rows], table.bearings_rad[rows], cylinder
+        )
     return rays

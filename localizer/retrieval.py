@@ -119,9 +119,7 @@ class PlaceIndex:
         np.add.at(scores, hit_place, 1.0 / places_hit[hit_query])
         return scores * self._weights
 
-    def shortlist(
-        self, descriptors: np.ndarray, k: int, exclude: int | None = None
-    ) -> np.ndarray:
+    def shortlist(self, descriptors: np.ndarray, k: int, exclude: int | None = None) -> np.ndarray:
         """Indices into the table's places of the ``k`` best-voted places, best first.
 
         Ties are broken by place index; places without a vote are still returned if fewer

@@ -14,8 +14,8 @@ to go but is not metres). Two variants:
   inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
   over the inliers only, in both views (the same landmarks here and at the goal).
 
-The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture, extract,
-step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
+The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
+extract, step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
 ``[min_step_m, max_step_m]``, times a step scale that halves whenever the home vector reverses
 (it turned by more than ``reverse_deg`` between two steps, in the goal view's frame: an
 overshoot) and recovers by ``scale_up`` otherwise. The robot cannot see ground truth, so arrival

@@ -2,10 +2,10 @@
 worlds, made on first use and kept in a cache folder.
 
 :func:`load_map` reads a map once (``mapdb.loading``) and prepares it for the localizer (rays,
-retrieval index). The demo and ``toploc sim kidnap`` need a map of a preset world: the world's dataset is
-rendered (``robot.dataset``) and built into a SQLite map (``mapdb.build``) once, then reused.
-The cache is ``$TOPLOC_HOME`` or ``~/.cache/toploc``; a half-made map (an interrupted first
-run) is completed on the next, since rendering and building are both resumable from scratch.
+retrieval index). The demo and ``toploc sim kidnap`` need a map of a preset world: the world's
+dataset is rendered (``robot.dataset``) and built into a SQLite map (``mapdb.build``) once, then
+reused. The cache is ``$TOPLOC_HOME`` or ``~/.cache/toploc``; a half-made map (an interrupted
+first run) is completed on the next, since rendering and building are both resumable.
 """
 
 from __future__ import annotations
@@ -28,7 +28,9 @@ from toploc.commands.map import resolve_extractor
 HOME_ENV = "TOPLOC_HOME"
 
 
-def load_map(db_path: Path | str, detector: str = "sift", use_index: bool | None = None) -> LoadedMap:
+def load_map(
+    db_path: Path | str, detector: str = "sift", use_index: bool | None = None
+) -> LoadedMap:
     """The map at ``db_path`` ready for a :class:`localizer.localizer.Localizer` (read once, the
     database closed again). Raises ``ValueError`` if it has no ``detector`` fingerprint and
     :class:`mapdb.errors.MapDatabaseError` for a missing, locked or damaged file."""

@@ -2,8 +2,8 @@
 
 :func:`start_service` opens the session and declares the map node, the localizer node and,
 when a robot object is given (the simulated robot here), its robot node. The localizer always
-drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base running its
-own robot node elsewhere is used the same way.
+drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base
+running its own robot node elsewhere is used the same way.
 """
 
 from __future__ import annotations

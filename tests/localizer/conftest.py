@@ -69,7 +69,8 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     render_dataset(dataset, "building", spacing_m=1.5, camera=camera, progress=False)
     db_path = root / "map.db"
     with MapDatabase.open(db_path) as map_db:
-        build_map(map_db, read_manifest(dataset), resolve_extractor(("sift",)), workers=0,
-                  progress=False)
+        build_map(
+            map_db, read_manifest(dataset), resolve_extractor(("sift",)), workers=0, progress=False
+        )
         connect_known_rooms(map_db, read_edges(dataset))
     return db_path, dataset

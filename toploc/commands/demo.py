@@ -33,9 +33,7 @@ def format_belief(belief: dict[str, Any], t0: float, top: int = 3) -> str:
 
 @click.command("demo")
 @click.option("--room", type=click.Choice(LOOK_ALIKE), default="office_b", show_default=True)
-@click.option(
-    "--seed", type=int, default=1, show_default=True, help="Seeds the kidnapped pose."
-)
+@click.option("--seed", type=int, default=1, show_default=True, help="Seeds the kidnapped pose.")
 @click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
 @click.option("--endpoint", default=DEFAULT_ENDPOINT, show_default=True)
 @click.option("--robot-id", default="robot", show_default=True)

@@ -74,9 +74,7 @@ index_option = click.option(
 @detector_option
 @index_option
 @click.option("--json", "as_json", is_flag=True, help="Print the belief as JSON.")
-def localize(
-    image: Path, db_path: Path, detector: str, index: bool | None, as_json: bool
-) -> None:
+def localize(image: Path, db_path: Path, detector: str, index: bool | None, as_json: bool) -> None:
     """Which room is the panorama IMAGE from? The one-shot belief over the map's rooms."""
     with localizer_errors():
         panorama = read_panorama(image)

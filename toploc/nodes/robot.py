@@ -167,7 +167,8 @@ class RobotNode:
 
 
 class RemoteRobot:
-    """A :class:`~localizer.robot_protocol.Robot` whose calls go over the bus to a :class:`RobotNode`.
+    """A :class:`~localizer.robot_protocol.Robot` whose calls go over the bus to a
+    :class:`RobotNode`.
 
     ``timeout_s`` bounds capture and odometry queries, ``move_timeout_s`` a move (it replies
     when done). Every call raises :class:`~toploc.bus.BusTimeout` if the node does not answer,
