@@ -151,7 +151,7 @@ def cached_table(cache_dir: Path, n_places: int, workers: int) -> tuple[Fingerpr
     position = {int(pid): i for i, pid in enumerate(table.place_ids)}
     order = np.array([position[id_of[_source(s)]] for s in items], dtype=np.int64)
     n_target = sum(1 for s in items if s.label == s.room)
-    return subset_table(table, order), n_target
+    return table.subset(order), n_target
 
 
 def _source(shot: Shot) -> str:
@@ -166,25 +166,6 @@ def _new_place(shot: Shot) -> NewPlace:
         x_m=shot.x_m,
         y_m=shot.y_m,
         heading_deg=shot.heading_deg,
-    )
-
-
-def subset_table(table: FingerprintTable, places: np.ndarray) -> FingerprintTable:
-    """The table restricted to the place indices ``places`` (in that order)."""
-    rows = np.concatenate(
-        [np.arange(table.offsets[i], table.offsets[i + 1]) for i in places] or [np.zeros(0, int)]
-    )
-    counts = np.diff(table.offsets)[places]
-    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return FingerprintTable(
-        detector=table.detector,
-        place_ids=table.place_ids[places],
-        rooms=tuple(table.rooms[i] for i in places),
-        offsets=offsets,
-        keypoints_xy=table.keypoints_xy[rows],
-        bearings_rad=table.bearings_rad[rows],
-        descriptors=np.ascontiguousarray(table.descriptors[rows]),
-        alv_xy=table.alv_xy[places],
     )
 
 
@@ -333,7 +314,7 @@ def main(argv: Sequence[str] | None = None) -> list[SizeResult]:
 
     results, twins = [], []
     for size in sizes:
-        sub = subset_table(table, choose_places(len(table.place_ids), n_target, size))
+        sub = table.subset(choose_places(len(table.place_ids), n_target, size))
         print(f"map of {size} places ({len(sub.descriptors)} keypoints) ...", flush=True)
         results.append(run_size(sub, queries, params, twins))
     print_table(results, args)

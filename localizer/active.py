@@ -7,21 +7,15 @@ pluggable (:mod:`localizer.policy`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from localizer.belief import LocalizationState, RoomBelief
-from localizer.localizer import Localizer, Observation
-from localizer.policy import (
-    POLICIES,
-    DiscriminativePolicy,
-    PlaceSimilarity,
-    PolicyContext,
-    make_policy,
-    separating_pairs,
-)
+from localizer.belief import LocalizationState, PlaceScore, RoomBelief
+from localizer.localizer import Localizer
+from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Robot
 from localizer.visual_homing import HomingParams, HomingResult, drive_home
+from mapdb.records import Place
 
 # A short homing move rarely leaves the room: keep most of the mass where it is.
 HOMING_STAY_PROBABILITY = 0.98
@@ -29,12 +23,10 @@ HOMING_STAY_PROBABILITY = 0.98
 
 @dataclass(frozen=True)
 class ActiveParams:
-    """``max_targets``: places the robot may drive to before it gives up;
-    ``rival_min_probability``: rooms at least this likely are hypotheses the separating policy
-    must tell apart; ``homing``: the visual homing loop's settings."""
+    """``max_targets``: places the robot may drive to before it gives up; ``homing``: the
+    visual homing loop's settings."""
 
     max_targets: int = 4
-    rival_min_probability: float = 0.02
     homing: HomingParams = field(default_factory=HomingParams)
 
 
@@ -61,29 +53,36 @@ class ActiveResult:
     distance_m: float
 
 
-def _similarity_for(
-    localizer: Localizer, belief: RoomBelief, min_probability: float, tried: set[int]
-) -> PlaceSimilarity:
-    """The stored-view similarity the separating policy will read for this belief."""
-    candidates, rivals = separating_pairs(belief, localizer.map.places, tried, min_probability)
-    return localizer.similarity(candidates, rivals)
+def active_step(
+    belief: RoomBelief,
+    evidence: Sequence[PlaceScore],
+    places: Sequence[Place],
+    policy: Policy,
+    context: PolicyContext,
+    max_targets: int,
+) -> int | None:
+    """The place to drive to next, or ``None`` when active localization is done: the belief is
+    not ambiguous, ``max_targets`` places have been tried, or the policy has nothing left."""
+    if belief.state is not LocalizationState.AMBIGUOUS or len(context.tried) >= max_targets:
+        return None
+    return policy.choose(belief, evidence, places, context)
 
 
 def localize_actively(
     localizer: Localizer,
     robot: Robot,
-    policy: str = "separating",
+    policy: Policy | str = "separating",
     params: ActiveParams | None = None,
     on_belief: Callable[[RoomBelief], None] | None = None,
 ) -> ActiveResult:
     """Localize from a uniform belief, driving to disambiguate while the belief is ambiguous.
 
-    ``policy`` names a policy of :data:`localizer.policy.POLICIES`; the ``separating`` one
-    gets the stored-view similarity of the places of the rooms still in play. ``on_belief`` is
-    called with each new belief (state ``homing`` while driving).
+    ``policy``: a :class:`~localizer.policy.Policy` or the name of one in
+    :data:`localizer.policy.POLICIES`; its context offers the localizer's stored-view
+    similarity, computed only where the policy asks. ``on_belief`` is called with each new
+    belief (state ``homing`` while driving).
     """
-    if policy not in POLICIES:
-        raise ValueError(f"unknown policy {policy!r}; known: {', '.join(sorted(POLICIES))}")
+    chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
     notify = on_belief or (lambda belief: None)
     localizer.reset()
@@ -92,12 +91,19 @@ def localize_actively(
     first, frames, distance = belief, 1, 0.0
     notify(belief)
     visits: list[Visit] = []
-    tried: set[int] = set()
-    while belief.state is LocalizationState.AMBIGUOUS and len(visits) < params.max_targets:
-        target = _choose(localizer, policy, belief, observation, tried, params)
+    context = PolicyContext(similarity=localizer.similarity)
+    while True:
+        target = active_step(
+            belief,
+            observation.evidence.places,
+            localizer.map.places,
+            chosen,
+            context,
+            params.max_targets,
+        )
         if target is None:
             break
-        tried.add(target)
+        context = context.trying(target)
         notify(localizer.belief(LocalizationState.HOMING))
         goal = localizer.map.fingerprint(target)
         homing = drive_home(robot, goal, localizer.extract, params.homing)
@@ -109,22 +115,3 @@ def localize_actively(
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
     return ActiveResult(first, belief, tuple(visits), frames, distance)
-
-
-def _choose(
-    localizer: Localizer,
-    policy: str,
-    belief: RoomBelief,
-    observation: Observation,
-    tried: set[int],
-    params: ActiveParams,
-) -> int | None:
-    options = {}
-    if policy == DiscriminativePolicy.name:
-        options["similarity"] = _similarity_for(
-            localizer, belief, params.rival_min_probability, tried
-        )
-        options["min_rival_probability"] = params.rival_min_probability
-    return make_policy(policy, **options).choose(
-        belief, observation.evidence.places, localizer.map.places, tried, PolicyContext()
-    )

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from typing import Any, Protocol
 
@@ -339,10 +339,11 @@ def classify(
 
 @dataclass(frozen=True)
 class RoomBelief:
-    """A snapshot of the belief for the bus and the policies.
+    """A snapshot of the belief, for the bus, the command line and the policies.
 
-    ``best_place_id`` / ``best_place_inliers``: the best-matching place of the latest frame, if
-    the caller knows it. ``stamp_s``: seconds (caller's clock), optional.
+    ``best_place_id`` / ``best_place_room`` / ``best_place_inliers``: the best-matching place of
+    the latest frame, if the caller knows it. ``stamp_s``: seconds (caller's clock), optional.
+    :meth:`to_json` / :meth:`from_json` are the one JSON form of a belief (README, "Belief").
     """
 
     rooms: tuple[str, ...]
@@ -352,6 +353,7 @@ class RoomBelief:
     best_place_id: int | None = None
     best_place_inliers: int | None = None
     stamp_s: float | None = None
+    best_place_room: str | None = None
 
     def __post_init__(self) -> None:
         if len(self.rooms) != len(self.probabilities) or not self.rooms:
@@ -379,7 +381,12 @@ class RoomBelief:
             best_place_id=None if best is None else int(best.place_id),
             best_place_inliers=None if best is None else int(best.inliers),
             stamp_s=stamp_s,
+            best_place_room=None if best is None else str(best.room),
         )
+
+    def with_state(self, state: LocalizationState) -> RoomBelief:
+        """The same belief with ``state`` set (the service says ``homing`` while it drives)."""
+        return replace(self, state=state)
 
     def as_dict(self) -> dict[str, float]:
         """``{room: probability}``."""
@@ -401,43 +408,100 @@ class RoomBelief:
         return ranked[1] if len(ranked) > 1 else None
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready dict: ``{"schema", "rooms": {name: p}, "state", "entropy_bits", "top",
-        "second", "top_two_ratio", "best_place", "stamp"}`` (ratio ``null`` when infinite)."""
+        """The belief message: ``{"schema", "kind": "belief", "rooms": {name: p}, "state",
+        "entropy_bits", "top", "second", "top_two_ratio", "best_place": {"place_id", "room",
+        "inliers"} | null, "stamp"}`` (ratio ``null`` when infinite; ``stamp`` in seconds)."""
         ratio = top_two_ratio(np.asarray(self.probabilities))
         second = self.second
+        best_place = None
+        if self.best_place_id is not None:
+            best_place = {
+                "place_id": self.best_place_id,
+                "room": self.best_place_room,
+                "inliers": self.best_place_inliers,
+            }
         return {
             "schema": BELIEF_SCHEMA,
+            "kind": BELIEF_KIND,
             "rooms": self.as_dict(),
             "state": str(self.state),
             "entropy_bits": self.entropy_bits,
             "top": {"room": self.top[0], "probability": self.top[1]},
             "second": None if second is None else {"room": second[0], "probability": second[1]},
             "top_two_ratio": ratio if math.isfinite(ratio) else None,
-            "best_place": None
-            if self.best_place_id is None
-            else {"place_id": self.best_place_id, "inliers": self.best_place_inliers},
+            "best_place": best_place,
             "stamp": self.stamp_s,
         }
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RoomBelief:
-        """Inverse of :meth:`to_json`; ``ValueError`` naming what is missing or wrong."""
+        """Inverse of :meth:`to_json`, checking every field (``top``, ``second`` and
+        ``top_two_ratio`` are derived, so they are recomputed rather than read). Raises
+        ``ValueError`` naming the field that is missing or wrong."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"a belief must be a JSON object, got {type(data).__name__}")
         if data.get("schema") != BELIEF_SCHEMA:
             raise ValueError(f"belief schema {data.get('schema')!r} is not {BELIEF_SCHEMA}")
-        try:
-            rooms = dict(data["rooms"])
-            best = data.get("best_place")
-            return cls(
-                rooms=tuple(rooms),
-                probabilities=tuple(float(p) for p in rooms.values()),
-                state=LocalizationState(data["state"]),
-                entropy_bits=float(data["entropy_bits"]),
-                best_place_id=None if best is None else int(best["place_id"]),
-                best_place_inliers=None if best is None else int(best["inliers"]),
-                stamp_s=None if data.get("stamp") is None else float(data["stamp"]),
-            )
-        except (KeyError, TypeError) as error:
-            raise ValueError(f"not a belief message: {error!r} in {dict(data)}") from error
+        rooms = _json_rooms(_field(data, "rooms"))
+        state = _field(data, "state")
+        if state not in _STATES:
+            raise ValueError(f"state must be one of {_STATES}, got {state!r}")
+        entropy = _json_number(_field(data, "entropy_bits"), "entropy_bits")
+        best = _field(data, "best_place")
+        stamp = data.get("stamp")
+        if best is not None and not isinstance(best, Mapping):
+            raise ValueError(f"best_place must be an object or null, got {best!r}")
+        return cls(
+            rooms=tuple(rooms),
+            probabilities=tuple(rooms.values()),
+            state=LocalizationState(state),
+            entropy_bits=entropy,
+            best_place_id=None if best is None else _json_int(best, "place_id"),
+            best_place_inliers=None if best is None else _json_int(best, "inliers"),
+            stamp_s=None if stamp is None else _json_number(stamp, "stamp"),
+            best_place_room=None if best is None else _json_room(best.get("room")),
+        )
+
+
+BELIEF_KIND = "belief"
+_STATES = tuple(str(state) for state in LocalizationState)
+
+
+def _field(data: Mapping[str, Any], name: str) -> Any:
+    if name not in data:
+        raise ValueError(f"a belief needs the field {name!r}; got {sorted(data)}")
+    return data[name]
+
+
+def _json_number(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _json_int(data: Mapping[str, Any], name: str) -> int:
+    value = data.get(name)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"best_place.{name} must be an integer, got {value!r}")
+    return value
+
+
+def _json_room(value: Any) -> str | None:
+    if value is not None and not isinstance(value, str):
+        raise ValueError(f"best_place.room must be a room name or null, got {value!r}")
+    return value
+
+
+def _json_rooms(value: Any) -> dict[str, float]:
+    if not isinstance(value, Mapping) or not value:
+        raise ValueError(f"rooms must be a non-empty object {{room: p}}, got {value!r}")
+    rooms = {}
+    for room, p in value.items():
+        probability = _json_number(p, f"rooms[{room!r}]")
+        if not 0.0 <= probability <= 1.0:
+            raise ValueError(f"rooms[{room!r}] must be a probability, got {p!r}")
+        rooms[str(room)] = probability
+    return rooms
 
 
 def _room_index(rooms: Sequence[str]) -> dict[str, int]:

@@ -202,17 +202,7 @@ class Localizer:
             evidence,
             stamp_s=time.time(),
         )
-        if state is None:
-            return belief
-        return RoomBelief(
-            belief.rooms,
-            belief.probabilities,
-            state,
-            belief.entropy_bits,
-            belief.best_place_id,
-            belief.best_place_inliers,
-            belief.stamp_s,
-        )
+        return belief if state is None else belief.with_state(state)
 
     def localize_once(self, image: np.ndarray) -> tuple[RoomBelief, Observation]:
         """One-shot: uniform prior, one update with ``image``."""

@@ -1,7 +1,10 @@
 """Active disambiguation: where to drive (by ALV homing) when the belief over rooms is ambiguous.
 
 A policy picks the id of a stored place to home to; the caller homes there, captures, updates
-the belief, adds the place to ``tried`` and asks again while the belief stays ambiguous.
+the belief, adds the place to the context's ``tried`` and asks again while the belief stays
+ambiguous (:func:`localizer.active.active_step`). Whatever a policy may ask the caller for (the
+places tried, the robot's position, a view similarity computed on demand) comes in its
+:class:`PolicyContext`, so the caller never needs to know which policy it runs.
 Positions are metres in the frame of the place's own room (the map is topological: rooms do not
 share a frame, so distances are only taken between places of the same room).
 
@@ -18,49 +21,20 @@ Pure core: no I/O.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Set as AbstractSet
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from localizer.belief import PlaceScore
-
-
-@dataclass(frozen=True)
-class MapPlace:
-    """A stored place of the map: id, room, and position in the room's frame (``None`` if
-    unknown)."""
-
-    place_id: int
-    room: str
-    x_m: float | None = None
-    y_m: float | None = None
-
-    @property
-    def xy_m(self) -> tuple[float, float] | None:
-        """``(x_m, y_m)`` or ``None`` when either is unknown."""
-        if self.x_m is None or self.y_m is None:
-            return None
-        return (float(self.x_m), float(self.y_m))
-
-
-@dataclass(frozen=True)
-class PolicyContext:
-    """What the caller knows beyond belief and evidence.
-
-    ``position_xy_m_by_room``: the robot's position under each room hypothesis, in that room's
-    frame (e.g. from homing and odometry). Where missing, the position of the room's
-    best-matching place in the latest evidence is used.
-    """
-
-    position_xy_m_by_room: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+from localizer.belief import PlaceScore, RoomBelief
+from mapdb.records import Place
 
 
 @dataclass(frozen=True, eq=False)
 class PlaceSimilarity:
-    """Precomputed similarity between stored places (computed by the caller with the evidence
-    code).
+    """Similarity between stored places (computed by the caller with the evidence code).
 
     ``inliers[i, j]``: verified inliers when the panorama of ``place_ids[i]`` is the query and
     ``place_ids[j]`` the reference. The diagonal is the self-match (matching a stored panorama
@@ -91,6 +65,31 @@ class PlaceSimilarity:
             raise ValueError(f"place {place_id} is not in the similarity matrix") from None
 
 
+SimilarityFunction = Callable[[tuple[int, ...], tuple[int, ...]], PlaceSimilarity]
+"""``similarity(rows, columns)``: a :class:`PlaceSimilarity` covering those place ids, in which
+at least each row against itself and against every column is filled in (computed on demand)."""
+
+
+@dataclass(frozen=True)
+class PolicyContext:
+    """What the caller knows beyond belief and evidence, and what a policy may ask it for.
+
+    ``tried``: place ids already driven to. ``position_xy_m_by_room``: the robot's position
+    under each room hypothesis, in that room's frame (e.g. from homing and odometry); where
+    missing, the position of the room's best-matching place in the latest evidence is used.
+    ``similarity``: stored-view similarity on demand (the separating policy needs it; matching
+    stored views costs time, so a policy asks for just the entries it reads).
+    """
+
+    tried: frozenset[int] = frozenset()
+    position_xy_m_by_room: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    similarity: SimilarityFunction | None = None
+
+    def trying(self, place_id: int) -> PolicyContext:
+        """The same context with ``place_id`` added to ``tried``."""
+        return replace(self, tried=self.tried | {int(place_id)})
+
+
 class Policy(Protocol):
     """Chooses the place to home to next."""
 
@@ -98,23 +97,17 @@ class Policy(Protocol):
 
     def choose(
         self,
-        belief: Mapping[str, float] | Any,
+        belief: RoomBelief,
         evidence: Sequence[PlaceScore],
-        places: Sequence[MapPlace],
-        tried: set[int],
-        context: PolicyContext | None = None,
+        places: Sequence[Place],
+        context: PolicyContext,
     ) -> int | None:
         """Target place id, or ``None`` if every candidate has been tried.
 
-        ``belief``: ``{room: probability}`` or anything with ``as_dict()`` (a ``RoomBelief``).
-        ``evidence``: the latest frame's per-place inliers. ``tried``: place ids already visited.
+        ``evidence``: the latest frame's per-place inliers. ``places``: the map's places.
+        ``context``: the places tried so far and what the policy may ask the caller for.
         """
         ...
-
-
-def _belief_map(belief: Mapping[str, float] | Any) -> dict[str, float]:
-    mapping = belief.as_dict() if hasattr(belief, "as_dict") else belief
-    return {str(room): float(p) for room, p in dict(mapping).items()}
 
 
 def _ranked_rooms(belief: Mapping[str, float], min_probability: float) -> list[str]:
@@ -130,16 +123,16 @@ def _inliers_by_place(evidence: Iterable[PlaceScore]) -> dict[int, int]:
     return best
 
 
-def _untried(places: Sequence[MapPlace], room: str, tried: set[int]) -> list[MapPlace]:
-    return [p for p in places if p.room == room and p.place_id not in tried]
+def _untried(places: Sequence[Place], room: str, tried: AbstractSet[int]) -> list[Place]:
+    return [p for p in places if p.room == room and p.id not in tried]
 
 
 def _target_room(
     probabilities: Mapping[str, float],
-    places: Sequence[MapPlace],
-    tried: set[int],
+    places: Sequence[Place],
+    tried: AbstractSet[int],
     min_room_probability: float,
-) -> tuple[str, list[MapPlace]] | None:
+) -> tuple[str, list[Place]] | None:
     """The most likely room (above ``min_room_probability``) with untried places, and those."""
     for room in _ranked_rooms(probabilities, min_room_probability):
         candidates = _untried(places, room, tried)
@@ -156,24 +149,23 @@ def _rivals(
 
 
 def separating_pairs(
-    belief: Mapping[str, float] | Any,
-    places: Sequence[MapPlace],
-    tried: set[int],
+    belief: Mapping[str, float],
+    places: Sequence[Place],
+    tried: AbstractSet[int],
     min_rival_probability: float = 0.02,
     min_room_probability: float = 0.0,
 ) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """``(candidates, rival places)``: the rows and columns of :class:`PlaceSimilarity` that
-    :meth:`DiscriminativePolicy.choose` reads for this belief (so a caller need compute no
-    more; both empty when there is nothing left to try)."""
-    probabilities = _belief_map(belief)
-    target = _target_room(probabilities, places, tried, min_room_probability)
+    :meth:`DiscriminativePolicy.choose` reads for ``belief`` (``{room: probability}``), so the
+    similarity function need compute no more; both empty when there is nothing left to try."""
+    target = _target_room(belief, places, tried, min_room_probability)
     if target is None:
         return (), ()
     room, candidates = target
-    rivals = _rivals(probabilities, room, min_rival_probability)
+    rivals = _rivals(belief, room, min_rival_probability)
     return (
-        tuple(c.place_id for c in candidates),
-        tuple(p.place_id for p in places if p.room in rivals),
+        tuple(c.id for c in candidates),
+        tuple(p.id for p in places if p.room in rivals),
     )
 
 
@@ -190,18 +182,17 @@ class ThesisPolicy:
 
     def choose(
         self,
-        belief: Mapping[str, float] | Any,
+        belief: RoomBelief,
         evidence: Sequence[PlaceScore],
-        places: Sequence[MapPlace],
-        tried: set[int],
-        context: PolicyContext | None = None,
+        places: Sequence[Place],
+        context: PolicyContext,
     ) -> int | None:
         inliers = _inliers_by_place(evidence)
-        target = _target_room(_belief_map(belief), places, tried, self.min_room_probability)
+        target = _target_room(belief.as_dict(), places, context.tried, self.min_room_probability)
         if target is None:
             return None
-        best = max(target[1], key=lambda p: (inliers.get(p.place_id, 0), -p.place_id))
-        return best.place_id
+        best = max(target[1], key=lambda p: (inliers.get(p.id, 0), -p.id))
+        return best.id
 
 
 @dataclass
@@ -216,19 +207,18 @@ class DiscriminativePolicy:
         separation(c) = 1 - confusion(c)
         score(c)      = separation(c) - travel_cost_per_m * distance_m(c)
 
-    ``S`` is :class:`PlaceSimilarity` (``S[c, c]`` the self-match; a place with ``S[c, c] = 0``
-    has separation 0). ``confusion`` is the fraction of ``c``'s own view that the best look-alike
-    place of a rival room also explains: 1 for identical views (office_a/office_b away from
-    their doors), lower where ``c`` sees something only ``R`` has (the view through the door).
-    ``distance_m(c)``: from the robot's position under hypothesis ``R`` (context, else the best
-    matching place of ``R`` in the evidence) to ``c``, 0 if either is unknown.
+    ``S`` is the context's :class:`PlaceSimilarity` (``S[c, c]`` the self-match; a place with
+    ``S[c, c] = 0`` has separation 0). ``confusion`` is the fraction of ``c``'s own view that the
+    best look-alike place of a rival room also explains: 1 for identical views (office_a/office_b
+    away from their doors), lower where ``c`` sees something only ``R`` has (the view through the
+    door). ``distance_m(c)``: from the robot's position under hypothesis ``R`` (context, else the
+    best matching place of ``R`` in the evidence) to ``c``, 0 if either is unknown.
     ``travel_cost_per_m = 0.02``: one metre of travel is worth two percentage points of
     separation, so among equally separating places the nearest wins, and a place 5 m further
     must separate 10 points better. Ties: more inliers in the evidence, then lower place id.
     With no rivals it falls back to the nearest place (``separation`` is 1 for all).
     """
 
-    similarity: PlaceSimilarity
     name: ClassVar[str] = "separating"
     min_rival_probability: float = 0.02
     travel_cost_per_m: float = 0.02
@@ -236,24 +226,33 @@ class DiscriminativePolicy:
 
     def choose(
         self,
-        belief: Mapping[str, float] | Any,
+        belief: RoomBelief,
         evidence: Sequence[PlaceScore],
-        places: Sequence[MapPlace],
-        tried: set[int],
-        context: PolicyContext | None = None,
+        places: Sequence[Place],
+        context: PolicyContext,
     ) -> int | None:
-        probabilities = _belief_map(belief)
+        if context.similarity is None:
+            raise ValueError("the separating policy needs a view similarity in its context")
+        probabilities = belief.as_dict()
         inliers = _inliers_by_place(evidence)
-        target = _target_room(probabilities, places, tried, self.min_room_probability)
+        target = _target_room(probabilities, places, context.tried, self.min_room_probability)
         if target is None:
             return None
         room, candidates = target
+        rows, columns = separating_pairs(
+            probabilities,
+            places,
+            context.tried,
+            self.min_rival_probability,
+            self.min_room_probability,
+        )
+        similarity = context.similarity(rows, columns)
         here = _position_in_room(room, places, inliers, context)
         scored = [
             (
-                self.score(c, room, probabilities, places, here),
-                inliers.get(c.place_id, 0),
-                -c.place_id,
+                self.score(similarity, c, room, probabilities, places, here),
+                inliers.get(c.id, 0),
+                -c.id,
             )
             for c in candidates
         ]
@@ -261,10 +260,11 @@ class DiscriminativePolicy:
 
     def score(
         self,
-        candidate: MapPlace,
+        similarity: PlaceSimilarity,
+        candidate: Place,
         room: str,
         belief: Mapping[str, float],
-        places: Sequence[MapPlace],
+        places: Sequence[Place],
         here_xy_m: tuple[float, float] | None,
     ) -> float:
         """``separation - travel_cost_per_m * distance_m`` of ``candidate`` under hypothesis
@@ -272,16 +272,20 @@ class DiscriminativePolicy:
         distance_m = 0.0
         if here_xy_m is not None and candidate.xy_m is not None:
             distance_m = math.dist(here_xy_m, candidate.xy_m)
-        return self.separation(candidate.place_id, room, belief, places) - (
-            self.travel_cost_per_m * distance_m
-        )
+        separation = self.separation(similarity, candidate.id, room, belief, places)
+        return separation - self.travel_cost_per_m * distance_m
 
     def separation(
-        self, place_id: int, room: str, belief: Mapping[str, float], places: Sequence[MapPlace]
+        self,
+        similarity: PlaceSimilarity,
+        place_id: int,
+        room: str,
+        belief: Mapping[str, float],
+        places: Sequence[Place],
     ) -> float:
         """``1 - confusion`` of ``place_id`` against the rivals of ``room`` (in [0, 1])."""
-        row = self.similarity.inliers[self.similarity.index(place_id)]
-        own = row[self.similarity.index(place_id)]
+        row = similarity.inliers[similarity.index(place_id)]
+        own = row[similarity.index(place_id)]
         rivals = _rivals(belief, room, self.min_rival_probability)
         total = sum(rivals.values())
         if total <= 0:
@@ -290,7 +294,7 @@ class DiscriminativePolicy:
             return 0.0
         confusion = 0.0
         for rival, p in rivals.items():
-            columns = [self.similarity.index(q.place_id) for q in places if q.room == rival]
+            columns = [similarity.index(q.id) for q in places if q.room == rival]
             if columns:
                 confusion += (p / total) * min(1.0, float(row[columns].max()) / own)
         return 1.0 - confusion
@@ -298,30 +302,30 @@ class DiscriminativePolicy:
 
 def _position_in_room(
     room: str,
-    places: Sequence[MapPlace],
+    places: Sequence[Place],
     inliers: Mapping[int, int],
-    context: PolicyContext | None,
+    context: PolicyContext,
 ) -> tuple[float, float] | None:
     """The robot's position under hypothesis ``room``: from context, else its best-matching
     place of that room in the evidence (``None`` if unknown)."""
-    if context is not None and room in context.position_xy_m_by_room:
+    if room in context.position_xy_m_by_room:
         x_m, y_m = context.position_xy_m_by_room[room]
         return (float(x_m), float(y_m))
-    in_room = [p for p in places if p.room == room and inliers.get(p.place_id, 0) > 0]
+    in_room = [p for p in places if p.room == room and inliers.get(p.id, 0) > 0]
     if not in_room:
         return None
-    return max(in_room, key=lambda p: (inliers[p.place_id], -p.place_id)).xy_m
+    return max(in_room, key=lambda p: (inliers[p.id], -p.id)).xy_m
 
 
-POLICIES: dict[str, type] = {
+POLICIES: dict[str, type[ThesisPolicy] | type[DiscriminativePolicy]] = {
     ThesisPolicy.name: ThesisPolicy,
     DiscriminativePolicy.name: DiscriminativePolicy,
 }
 
 
 def make_policy(name: str, **kwargs: Any) -> Policy:
-    """The policy registered as ``name`` in :data:`POLICIES`, built with ``kwargs``
-    (``"separating"`` needs ``similarity=PlaceSimilarity(...)``)."""
+    """The policy registered as ``name`` in :data:`POLICIES`, built with ``kwargs`` (its
+    settings, e.g. ``min_rival_probability``)."""
     try:
         cls = POLICIES[name]
     except KeyError:

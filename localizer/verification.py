@@ -24,8 +24,10 @@ cameras; with a small baseline (a query taken near the stored place, the case we
 score high) the depth of nearly parallel rays has a random sign, so about half the true matches
 fail that test. We therefore rescore all pairs under the estimated model: a pair is an inlier when
 its tangent Sampson error (first-order angular distance to the epipolar great circles, radians) is
-below ``max_error_rad`` and the place ray, rotated into the query frame, is less than 90° from the
-query ray (rejecting the antipodal twins the epipolar constraint cannot tell apart on a sphere).
+below ``max_error_rad`` and it is not an antipodal twin (which the epipolar constraint cannot tell
+apart on a sphere): either the place ray, rotated into the query frame, is less than 90° from the
+query ray (distant points, small parallax), or the two rays triangulate in front of both cameras
+(points near the camera, seen with more than 90° of parallax, where that depth is well defined).
 """
 
 from __future__ import annotations
@@ -174,8 +176,29 @@ def inlier_mask(
     """Boolean (n,): the pairs consistent with the pose (see the module docstring)."""
     E = _skew(translation_dir) @ R_query_from_place
     err = tangent_sampson_error_rad(E, rays_place, rays_query)
-    same_side = np.einsum("ij,ij->i", rays_place @ R_query_from_place.T, rays_query) > 0.0
-    return (err <= max_error_rad) & same_side
+    rotated = rays_place @ R_query_from_place.T
+    same_side = np.einsum("ij,ij->i", rotated, rays_query) > 0.0
+    depth_place, depth_query = triangulated_depths(rotated, rays_query, translation_dir)
+    in_front = (depth_place > 0.0) & (depth_query > 0.0)
+    return (err <= max_error_rad) & (same_side | in_front)
+
+
+def triangulated_depths(
+    rotated_place: np.ndarray, rays_query: np.ndarray, translation_dir: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Depths ``(d_place, d_query)`` (units of the baseline) of the closest approach of the
+    rays ``d_place * rotated_place + t`` and ``d_query * rays_query`` (query frame; the place
+    rays already rotated into it): the least-squares solution of
+    ``d_place * a - d_query * c = -t``. Parallel rays get depth 0 (no triangulation)."""
+    k = np.einsum("ij,ij->i", rotated_place, rays_query)
+    a_t = rotated_place @ translation_dir
+    c_t = rays_query @ translation_dir
+    det = 1.0 - k**2
+    ok = det > 1e-9
+    safe = np.where(ok, det, 1.0)
+    d_place = np.where(ok, (k * c_t - a_t) / safe, 0.0)
+    d_query = np.where(ok, (c_t - k * a_t) / safe, 0.0)
+    return d_place, d_query
 
 
 def verify(

@@ -39,19 +39,28 @@ class NewPlace:
 
 @dataclass(frozen=True)
 class Place:
-    """A stored place (one panorama) of the map."""
+    """A stored place (one panorama) of the map: its id, room and pose in the room's frame
+    (``None`` where unknown), and the panorama's bookkeeping (empty where not read from a map
+    database, e.g. in a test or a simulation)."""
 
     id: int
     room: str
-    x_m: float | None
-    y_m: float | None
-    heading_deg: float | None
-    image_sha256: str
-    image_width_px: int
-    image_height_px: int
-    captured_utc: str | None
-    source: str
-    added_utc: str
+    x_m: float | None = None
+    y_m: float | None = None
+    heading_deg: float | None = None
+    image_sha256: str = ""
+    image_width_px: int = 0
+    image_height_px: int = 0
+    captured_utc: str | None = None
+    source: str = ""
+    added_utc: str = ""
+
+    @property
+    def xy_m(self) -> tuple[float, float] | None:
+        """``(x_m, y_m)`` in the room's frame, or ``None`` when either is unknown."""
+        if self.x_m is None or self.y_m is None:
+            return None
+        return (float(self.x_m), float(self.y_m))
 
 
 @dataclass(frozen=True)

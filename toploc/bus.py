@@ -170,6 +170,18 @@ def encode(kind: str, payload: Mapping[str, Any]) -> bytes:
     return text.encode()
 
 
+def encode_message(message: Mapping[str, Any]) -> bytes:
+    """A message that carries its own envelope (``schema`` and ``kind``, e.g.
+    ``RoomBelief.to_json()``) as UTF-8 JSON; ``ValueError`` for another schema or no kind."""
+    kind = message.get("kind")
+    if message.get("schema") != SCHEMA_VERSION or not isinstance(kind, str):
+        raise ValueError(
+            f"a message needs schema {SCHEMA_VERSION} and a kind, got schema "
+            f"{message.get('schema')!r} and kind {kind!r}"
+        )
+    return encode(kind, {k: v for k, v in message.items() if k not in ("schema", "kind")})
+
+
 def _type_name(expected: FieldType) -> str:
     types = expected if isinstance(expected, tuple) else (expected,)
     return " or ".join("null" if t is type(None) else t.__name__ for t in types)

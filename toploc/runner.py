@@ -10,7 +10,6 @@ than changing the belief under the running loop.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -20,20 +19,6 @@ from localizer.localizer import Localizer
 from localizer.robot_protocol import Robot
 
 RESET_WAIT_S = 1.0
-
-
-def belief_message(belief: RoomBelief, localizer: Localizer) -> dict[str, Any]:
-    """The bus's belief message for ``belief`` (see README, "The Zenoh bus")."""
-    message = belief.to_json()
-    message.pop("schema", None)  # the bus envelope carries the schema version
-    message["stamp"] = float(belief.stamp_s if belief.stamp_s is not None else time.time())
-    if belief.best_place_id is not None:
-        message["best_place"] = {
-            "place_id": belief.best_place_id,
-            "room": localizer.map.place(belief.best_place_id).room,
-            "inliers": int(belief.best_place_inliers or 0),
-        }
-    return message
 
 
 class LocalizationRunner:
@@ -58,10 +43,10 @@ class LocalizationRunner:
         self.publish = publish
         self._run_lock = threading.Lock()
         self._snapshot_lock = threading.Lock()
-        self._latest = belief_message(localizer.belief(), localizer)
+        self._latest = localizer.belief().to_json()
 
     def _set(self, belief: RoomBelief) -> None:
-        message = belief_message(belief, self.localizer)
+        message = belief.to_json()
         with self._snapshot_lock:
             self._latest = message
         if self.publish is not None:

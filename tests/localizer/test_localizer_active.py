@@ -68,5 +68,5 @@ def test_no_targets_allowed_means_no_drive(localizer):
 
 
 def test_an_unknown_policy_is_refused_by_name(localizer):
-    with pytest.raises(ValueError, match="unknown policy 'nearest'"):
+    with pytest.raises(ValueError, match="unknown disambiguation policy 'nearest'"):
         localize_actively(localizer, BlindRobot(), "nearest")

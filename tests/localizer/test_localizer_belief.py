@@ -309,12 +309,28 @@ def test_room_belief_json_round_trip():
     assert data["top"] == {"room": "office_a", "probability": 0.6}
     assert data["second"]["room"] == "office_b"
     assert data["top_two_ratio"] == pytest.approx(2.0)
-    assert data["best_place"] == {"place_id": 0, "inliers": 120}
+    assert data["best_place"] == {"place_id": 0, "room": "office_a", "inliers": 120}
     assert data["entropy_bits"] == pytest.approx(entropy_bits(p))
     assert RoomBelief.from_json(data) == snapshot
     homing = RoomBelief.from_json({**data, "state": "homing"})
     assert homing.state is LocalizationState.HOMING
     with pytest.raises(ValueError, match="schema"):
         RoomBelief.from_json({**data, "schema": 99})
-    with pytest.raises(ValueError, match="not a belief"):
+    with pytest.raises(ValueError, match="a belief needs the field 'state'"):
         RoomBelief.from_json({k: v for k, v in data.items() if k != "state"})
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"rooms": {}}, "rooms must be a non-empty object"),
+        ({"rooms": {"a": 1.5}}, r"rooms\['a'\] must be a probability"),
+        ({"state": "confused"}, "state must be one of"),
+        ({"entropy_bits": "high"}, "entropy_bits must be a finite number"),
+        ({"best_place": {"place_id": "4", "inliers": 1}}, "best_place.place_id must be an integer"),
+    ],
+)
+def test_a_bad_belief_message_names_the_field(change, message):
+    data = RoomBelief.from_probabilities(("a", "b"), np.array([0.5, 0.5])).to_json()
+    with pytest.raises(ValueError, match=message):
+        RoomBelief.from_json({**data, **change})

@@ -66,10 +66,10 @@ def test_reset_with_a_prior_and_prediction_along_the_graph(localizer: Localizer)
 def test_leaving_a_place_out_removes_it_from_the_evidence(localizer: Localizer):
     place = localizer.map.places[0]
     fingerprint = localizer.map.fingerprint(place.id)
-    kept = localizer.observe_fingerprint(fingerprint, exclude=place.place_id)
-    assert all(e.place_id != place.place_id for e in kept.evidence.places)
+    kept = localizer.observe_fingerprint(fingerprint, exclude=place.id)
+    assert all(e.place_id != place.id for e in kept.evidence.places)
     full = localizer.observe_fingerprint(fingerprint)
-    assert full.evidence.best.place_id == place.place_id
+    assert full.evidence.best.place_id == place.id
 
 
 def test_a_blank_panorama_leaves_the_localizer_lost(localizer: Localizer):

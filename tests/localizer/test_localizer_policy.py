@@ -9,23 +9,22 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from localizer.active import active_step
 from localizer.belief import (
     BeliefFilter,
-    LocalizationState,
     RoomBelief,
-    classify,
     room_likelihood,
 )
 from localizer.policy import (
     POLICIES,
     DiscriminativePolicy,
-    MapPlace,
     PlaceSimilarity,
     PolicyContext,
     ThesisPolicy,
     make_policy,
     separating_pairs,
 )
+from mapdb.records import Place
 
 
 @dataclass(frozen=True)
@@ -38,41 +37,58 @@ class Ev:
 # ---- the thesis policy -----------------------------------------------------------------------
 
 PLACES = [
-    MapPlace(1, "a", 0.0, 0.0),
-    MapPlace(2, "a", 1.0, 0.0),
-    MapPlace(3, "a", 2.0, 0.0),
-    MapPlace(11, "b", 0.0, 0.0),
-    MapPlace(12, "b", 1.0, 0.0),
-    MapPlace(21, "c", 0.0, 0.0),
+    Place(1, "a", 0.0, 0.0),
+    Place(2, "a", 1.0, 0.0),
+    Place(3, "a", 2.0, 0.0),
+    Place(11, "b", 0.0, 0.0),
+    Place(12, "b", 1.0, 0.0),
+    Place(21, "c", 0.0, 0.0),
 ]
 EVIDENCE = [Ev(1, "a", 40), Ev(2, "a", 250), Ev(3, "a", 90), Ev(11, "b", 260), Ev(12, "b", 30)]
+
+
+def rb(probabilities: dict[str, float]) -> RoomBelief:
+    """A belief snapshot with these room probabilities."""
+    return RoomBelief.from_probabilities(
+        tuple(probabilities), np.array(list(probabilities.values()))
+    )
+
+
+def ctx(tried=(), similarity: PlaceSimilarity | None = None, **options) -> PolicyContext:
+    """A policy context: places tried, and a similarity function serving ``similarity``."""
+    serve = None if similarity is None else (lambda rows, columns: similarity)
+    return PolicyContext(tried=frozenset(tried), similarity=serve, **options)
 
 
 def test_thesis_picks_the_best_place_of_the_most_likely_room():
     policy = ThesisPolicy()
     belief = {"a": 0.6, "b": 0.35, "c": 0.05}
     # b's place 11 has the most inliers overall, but a is the most likely room
-    assert policy.choose(belief, EVIDENCE, PLACES, set()) == 2
-    assert policy.choose(belief, EVIDENCE, PLACES, {2}) == 3
-    assert policy.choose(belief, EVIDENCE, PLACES, {2, 3}) == 1
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx()) == 2
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx({2})) == 3
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx({2, 3})) == 1
 
 
 def test_thesis_moves_to_the_next_room_then_gives_up():
     policy = ThesisPolicy()
     belief = {"a": 0.6, "b": 0.35, "c": 0.05}
-    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3}) == 11
-    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11}) == 12
-    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12}) == 21  # no evidence there
-    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12, 21}) is None
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx({1, 2, 3})) == 11
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx({1, 2, 3, 11})) == 12
     assert (
-        ThesisPolicy(min_room_probability=0.1).choose(belief, EVIDENCE, PLACES, {1, 2, 3, 11, 12})
+        policy.choose(rb(belief), EVIDENCE, PLACES, ctx({1, 2, 3, 11, 12})) == 21
+    )  # no evidence there
+    assert policy.choose(rb(belief), EVIDENCE, PLACES, ctx({1, 2, 3, 11, 12, 21})) is None
+    assert (
+        ThesisPolicy(min_room_probability=0.1).choose(
+            rb(belief), EVIDENCE, PLACES, ctx({1, 2, 3, 11, 12})
+        )
         is None
     )
 
 
 def test_thesis_accepts_a_room_belief_snapshot():
     snapshot = RoomBelief.from_probabilities(("a", "b", "c"), np.array([0.2, 0.7, 0.1]))
-    assert ThesisPolicy().choose(snapshot, EVIDENCE, PLACES, set()) == 11
+    assert ThesisPolicy().choose(snapshot, EVIDENCE, PLACES, ctx()) == 11
 
 
 # ---- the separating policy -------------------------------------------------------------------
@@ -81,8 +97,8 @@ def test_thesis_accepts_a_room_belief_snapshot():
 def lookalike_similarity(door_place: int = 3, door_loss: float = 0.4) -> PlaceSimilarity:
     """Rooms a and b identical except at one place of a (``door_place``), whose view through the
     door the b places explain only partly. Self-match 400, same-room 200, look-alike twin 380."""
-    ids = [p.place_id for p in PLACES]
-    room = {p.place_id: p.room for p in PLACES}
+    ids = [p.id for p in PLACES]
+    room = {p.id: p.room for p in PLACES}
     twin = {1: 11, 2: 12, 3: 12, 11: 1, 12: 2}
     matrix = np.full((len(ids), len(ids)), 10.0)
     for i, pi in enumerate(ids):
@@ -105,10 +121,11 @@ def lookalike_similarity(door_place: int = 3, door_loss: float = 0.4) -> PlaceSi
 def test_separating_picks_the_place_that_differs():
     belief = {"a": 0.5, "b": 0.45, "c": 0.05}
     for door_place in (1, 2, 3):
-        policy = DiscriminativePolicy(lookalike_similarity(door_place), travel_cost_per_m=0.0)
-        assert policy.choose(belief, EVIDENCE, PLACES, set()) == door_place
+        policy = DiscriminativePolicy(travel_cost_per_m=0.0)
+        context = ctx(similarity=lookalike_similarity(door_place))
+        assert policy.choose(rb(belief), EVIDENCE, PLACES, context) == door_place
     # the thesis goes to the best-matching place instead, however the rooms differ
-    assert ThesisPolicy().choose(belief, EVIDENCE, PLACES, set()) == 2
+    assert ThesisPolicy().choose(rb(belief), EVIDENCE, PLACES, ctx()) == 2
 
 
 def test_separating_pairs_are_all_the_policy_reads():
@@ -119,8 +136,17 @@ def test_separating_pairs_are_all_the_policy_reads():
     full = lookalike_similarity(3)
     keep = [full.index(p) for p in (*candidates, *rivals)]
     only_pairs = PlaceSimilarity((*candidates, *rivals), full.inliers[np.ix_(keep, keep)])
-    choice = DiscriminativePolicy(only_pairs).choose(belief, EVIDENCE, PLACES, {2})
-    assert choice == DiscriminativePolicy(full).choose(belief, EVIDENCE, PLACES, {2}) == 3
+    asked = []
+
+    def similarity(rows, columns):
+        asked.append((rows, columns))
+        return only_pairs
+
+    context = PolicyContext(tried=frozenset({2}), similarity=similarity)
+    choice = DiscriminativePolicy().choose(rb(belief), EVIDENCE, PLACES, context)
+    assert asked == [(candidates, rivals)]  # the policy asks for exactly these entries
+    full_choice = DiscriminativePolicy().choose(rb(belief), EVIDENCE, PLACES, ctx({2}, full))
+    assert choice == full_choice == 3
 
 
 def test_separating_pairs_are_empty_when_everything_was_tried():
@@ -129,39 +155,34 @@ def test_separating_pairs_are_empty_when_everything_was_tried():
 
 def test_separating_score_is_documented_formula():
     similarity = lookalike_similarity(3, door_loss=0.4)
-    policy = DiscriminativePolicy(similarity, travel_cost_per_m=0.0, min_rival_probability=0.02)
+    policy = DiscriminativePolicy(travel_cost_per_m=0.0, min_rival_probability=0.02)
     belief = {"a": 0.5, "b": 0.45, "c": 0.05}
     # place 3: best b place explains 380*0.6/400; c explains 10/400; rivals weighted .45/.5, .05/.5
     expected = 1 - (0.9 * (380 * 0.6 / 400) + 0.1 * (10 / 400))
-    assert policy.separation(3, "a", belief, PLACES) == pytest.approx(expected)
-    assert policy.separation(2, "a", {"a": 1.0}, PLACES) == 1.0  # no rivals
+    assert policy.separation(similarity, 3, "a", belief, PLACES) == pytest.approx(expected)
+    assert policy.separation(similarity, 2, "a", {"a": 1.0}, PLACES) == 1.0  # no rivals
 
 
 def test_separating_trades_separation_against_travel():
     belief = {"a": 0.5, "b": 0.5, "c": 0.0}
     similarity = lookalike_similarity(3, door_loss=0.05)  # door place only slightly better
-    here = PolicyContext(position_xy_m_by_room={"a": (0.0, 0.0)})
+    here = ctx(similarity=similarity, position_xy_m_by_room={"a": (0.0, 0.0)})
     assert (
-        DiscriminativePolicy(similarity, travel_cost_per_m=0.0).choose(
-            belief, EVIDENCE, PLACES, set(), here
-        )
-        == 3
+        DiscriminativePolicy(travel_cost_per_m=0.0).choose(rb(belief), EVIDENCE, PLACES, here) == 3
     )
     # 2 m to place 3 cost 0.2 > its ~0.05 separation gain: stay near (place 1 is where we are)
     assert (
-        DiscriminativePolicy(similarity, travel_cost_per_m=0.1).choose(
-            belief, EVIDENCE, PLACES, set(), here
-        )
-        == 1
+        DiscriminativePolicy(travel_cost_per_m=0.1).choose(rb(belief), EVIDENCE, PLACES, here) == 1
     )
 
 
 def test_separating_skips_tried_places_and_rooms():
-    policy = DiscriminativePolicy(lookalike_similarity(3))
-    belief = {"a": 0.5, "b": 0.45, "c": 0.05}
-    assert policy.choose(belief, EVIDENCE, PLACES, {3}) in {1, 2}
-    assert policy.choose(belief, EVIDENCE, PLACES, {1, 2, 3}) in {11, 12}
-    assert policy.choose(belief, EVIDENCE, PLACES, {p.place_id for p in PLACES}) is None
+    policy, similarity = DiscriminativePolicy(), lookalike_similarity(3)
+    belief = rb({"a": 0.5, "b": 0.45, "c": 0.05})
+    assert policy.choose(belief, EVIDENCE, PLACES, ctx({3}, similarity)) in {1, 2}
+    assert policy.choose(belief, EVIDENCE, PLACES, ctx({1, 2, 3}, similarity)) in {11, 12}
+    everything = {p.id for p in PLACES}
+    assert policy.choose(belief, EVIDENCE, PLACES, ctx(everything, similarity)) is None
 
 
 def test_similarity_validation_and_missing_places():
@@ -173,18 +194,22 @@ def test_similarity_validation_and_missing_places():
         PlaceSimilarity((1, 2), -np.ones((2, 2)))
     partial = PlaceSimilarity((1, 2), np.eye(2))
     with pytest.raises(ValueError, match="place 3 is not in the similarity matrix"):
-        DiscriminativePolicy(partial).choose({"a": 1.0}, EVIDENCE, PLACES, {1, 2})
+        DiscriminativePolicy().choose(rb({"a": 1.0}), EVIDENCE, PLACES, ctx({1, 2}, partial))
+
+
+def test_separating_without_a_similarity_says_what_it_needs():
+    with pytest.raises(ValueError, match="separating policy needs a view similarity"):
+        DiscriminativePolicy().choose(rb({"a": 0.5, "b": 0.5}), EVIDENCE, PLACES, ctx())
 
 
 def test_registry_and_make_policy():
     assert set(POLICIES) == {"most-likely", "separating"}
     assert isinstance(make_policy("most-likely"), ThesisPolicy)
-    similarity = lookalike_similarity()
-    assert make_policy("separating", similarity=similarity).similarity is similarity
+    assert make_policy("separating", travel_cost_per_m=0.1).travel_cost_per_m == 0.1
     with pytest.raises(ValueError, match=r"unknown disambiguation policy 'greedy'.*most-likely"):
         make_policy("greedy")
     with pytest.raises(ValueError, match="cannot build policy 'separating'"):
-        make_policy("separating")
+        make_policy("separating", similarity=lookalike_similarity())
 
 
 # ---- comparison on a synthetic look-alike world ----------------------------------------------
@@ -199,15 +224,15 @@ WORLD_ROOMS = ("office_a", "office_b", "corridor", "lab")
 WORLD_EDGES = (("office_a", "corridor"), ("office_b", "corridor"), ("lab", "corridor"))
 
 
-def world_places() -> list[MapPlace]:
+def world_places() -> list[Place]:
     places = []
     for r, room in enumerate(WORLD_ROOMS):
         count = N_IN_OFFICE if room.startswith("office") else 3
-        places += [MapPlace(10 * r + k, room, float(k), 0.0) for k in range(count)]
+        places += [Place(10 * r + k, room, float(k), 0.0) for k in range(count)]
     return places
 
 
-def view_similarity(room_here: str, k: int, place: MapPlace) -> float:
+def view_similarity(room_here: str, k: int, place: Place) -> float:
     """Expected inliers of a capture at index k of room_here against a stored place."""
     same_layout = room_here.startswith("office") and place.room.startswith("office")
     if place.room != room_here and not same_layout:
@@ -216,41 +241,37 @@ def view_similarity(room_here: str, k: int, place: MapPlace) -> float:
     return base if place.room == room_here else base * (1 - DOOR_SHARE[k])
 
 
-def world_similarity(places: list[MapPlace]) -> PlaceSimilarity:
+def world_similarity(places: list[Place]) -> PlaceSimilarity:
     matrix = np.array([[view_similarity(c.room, int(c.x_m), q) for q in places] for c in places])
     np.fill_diagonal(matrix, 400.0)  # self-match
-    return PlaceSimilarity(tuple(p.place_id for p in places), matrix)
+    return PlaceSimilarity(tuple(p.id for p in places), matrix)
 
 
 def run_episode(policy, true_room: str, start_k: int, rng, max_moves: int = 12):
-    """Moves, travel (m) and the final belief's top room; belief updated after each capture."""
+    """Moves, travel (m) and the final belief's top room, driving by :func:`active_step` (the
+    active loop's decision) with a belief updated after each capture."""
     places = world_places()
-    by_id = {p.place_id: p for p in places}
+    by_id = {p.id: p for p in places}
     belief = BeliefFilter(WORLD_ROOMS, WORLD_EDGES, stay_probability=0.8)
-    k, moves, travel_m, tried = start_k, 0, 0.0, set()
+    similarity = world_similarity(places)
+    context = PolicyContext(similarity=lambda rows, columns: similarity)
+    k, moves, travel_m = start_k, 0, 0.0
 
     def capture():
         noisy = [
-            Ev(
-                p.place_id,
-                p.room,
-                max(0, round(view_similarity(true_room, k, p) + rng.normal(0, 8))),
-            )
+            Ev(p.id, p.room, max(0, round(view_similarity(true_room, k, p) + rng.normal(0, 8))))
             for p in places
         ]
         belief.update(room_likelihood(noisy, WORLD_ROOMS))
         return noisy
 
     evidence = capture()
-    while (
-        classify(belief.probabilities, evidence_max_inliers=300) is not LocalizationState.LOCALIZED
-    ):
-        if moves == max_moves:
-            break
-        target = policy.choose(belief.as_dict(), evidence, places, tried)
+    while True:
+        snapshot = RoomBelief.from_probabilities(WORLD_ROOMS, belief.probabilities, None, evidence)
+        target = active_step(snapshot, evidence, places, policy, context, max_moves)
         if target is None:
             break
-        tried.add(target)
+        context = context.trying(target)
         moves += 1
         if by_id[target].room.startswith("office"):  # homing ends at the same spot of the true room
             new_k = int(by_id[target].x_m)
@@ -265,7 +286,7 @@ def run_episode(policy, true_room: str, start_k: int, rng, max_moves: int = 12):
 def compare(n_episodes: int, seed: int = 0) -> dict[str, dict[str, float]]:
     policies = {
         "most-likely": ThesisPolicy(),
-        "separating": DiscriminativePolicy(world_similarity(world_places())),
+        "separating": DiscriminativePolicy(),
     }
     results = {}
     for name, policy in policies.items():

@@ -34,6 +34,8 @@ def random_table(rng: np.random.Generator, counts: list[int], dim: int = 128) ->
         bearings_rad=np.zeros(n),
         descriptors=rng.random((n, dim), dtype=np.float32),
         alv_xy=np.zeros((len(counts), 2)),
+        image_sizes_px=np.tile([512, 96], (len(counts), 1)),
+        params=({},) * len(counts),
     )
 
 

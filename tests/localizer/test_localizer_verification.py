@@ -91,6 +91,16 @@ def test_yaw_recovered_for_any_heading_change(
     assert abs(wrap_angle_rad(result.yaw_rad - yaw_rad)) < 1e-4
 
 
+def test_points_near_the_camera_seen_with_wide_parallax_are_inliers() -> None:
+    # Three of these points lie within 1 m of the query, 1.8 m from the place: the two rays of
+    # each are more than 90° apart, yet they triangulate in front of both cameras.
+    rng = np.random.default_rng(0)
+    query, place, pairs = two_views(rng, 60, 0.0, np.array([1.0, -1.5, 0.0]))
+    rotated = place  # yaw 0: the place's rays are already in the query's orientation
+    assert np.sum(np.einsum("ij,ij->i", rotated, query) <= 0) >= 3
+    assert verify(query, place, pairs, VerificationParams(seed=0)).inliers == 60
+
+
 def test_deterministic_for_a_seed() -> None:
     rng = np.random.default_rng(8)
     query, place, pairs = two_views(rng, 120, 1.0, np.array([0.3, 0.2, 0.0]), n_outliers=70)

@@ -41,11 +41,11 @@ def _leave_one_out_outcomes(localizer: Localizer, progress: bool) -> list[QueryO
     for place in tqdm(localizer.map.places, desc="leave-one-out", disable=not progress):
         localizer.reset()
         fingerprint = localizer.map.fingerprint(place.id)
-        observation = localizer.observe_fingerprint(fingerprint, exclude=place.place_id)
+        observation = localizer.observe_fingerprint(fingerprint, exclude=place.id)
         belief = localizer.update(observation)
         outcomes.append(
             QueryOutcome(
-                f"place {place.place_id}",
+                f"place {place.id}",
                 place.room,
                 belief.top[0],
                 str(belief.state),

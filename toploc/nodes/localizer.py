@@ -10,9 +10,8 @@ Keys under ``toploc/<robot_id>/``:
 - ``localizer/reset`` (queryable): optional ``{"prior": {room: p}}``; uniform belief without.
 - liveliness token ``alive/localizer``.
 
-Belief JSON (``kind: "belief"``): ``{"rooms": {name: p}, "state": "localized" | "ambiguous" |
-"homing" | "lost", "entropy_bits": float, "best_place": {"place_id", "room", "inliers"} | null,
-"stamp": float}`` (``stamp`` in seconds since the epoch).
+The belief is the one JSON form of :meth:`localizer.belief.RoomBelief.to_json` (``kind:
+"belief"``); every belief sent or received is checked by :meth:`RoomBelief.from_json`.
 
 Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
 indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
@@ -30,20 +29,12 @@ from typing import Any, Protocol
 
 import zenoh
 
+from localizer.belief import RoomBelief
 from toploc import bus
 
 NODE_NAME = "localizer"
 _log = logging.getLogger(__name__)
-STATES = ("localized", "ambiguous", "homing", "lost")
 LOCALIZE_TIMEOUT_S = 300.0
-BELIEF_FIELDS: dict[str, bus.FieldType] = {
-    "rooms": dict,
-    "state": str,
-    "entropy_bits": float,
-    "best_place": (dict, type(None)),
-    "stamp": float,
-}
-BEST_PLACE_FIELDS: dict[str, bus.FieldType] = {"place_id": int, "room": str, "inliers": int}
 
 
 class LocalizationService(Protocol):
@@ -63,19 +54,12 @@ class LocalizationService(Protocol):
 
 
 def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
-    """Validate a belief dict (names ``where`` and the bad field); return it without envelope."""
-    bus.check_fields(where, belief, BELIEF_FIELDS)
-    rooms = belief["rooms"]
-    for room, p in rooms.items():
-        if not bus.has_type(p, float) or not 0.0 <= p <= 1.0:
-            raise bus.BusMessageError(f"{where}: rooms[{room!r}] must be a probability, got {p!r}")
-    if belief["state"] not in STATES:
-        raise bus.BusMessageError(
-            f"{where}: state must be one of {STATES}, got {belief['state']!r}"
-        )
-    if belief["best_place"] is not None:
-        bus.check_fields(f"{where} best_place", belief["best_place"], BEST_PLACE_FIELDS)
-    return {name: value for name, value in belief.items() if name not in ("schema", "kind")}
+    """The belief message (``RoomBelief.to_json()``) ``belief`` stands for, checked field by
+    field; :class:`~toploc.bus.BusMessageError` prefixed ``where`` naming the bad field."""
+    try:
+        return RoomBelief.from_json(belief).to_json()
+    except ValueError as error:
+        raise bus.BusMessageError(f"{where}: {error}") from None
 
 
 def check_prior(where: str, prior: Any) -> dict[str, float] | None:
@@ -135,7 +119,7 @@ class LocalizerNode:
         with self._publish_lock:
             if checked == self._last_published:
                 return False
-            self._publisher.put(bus.encode("belief", checked))
+            self._publisher.put(bus.encode_message(checked))
             self._last_published = checked
         return True
 
@@ -144,7 +128,7 @@ class LocalizerNode:
         checked = check_belief(where, belief)
         if publish:
             self.publish(checked)
-        return bus.Reply(bus.encode("belief", checked))
+        return bus.Reply(bus.encode_message(checked))
 
     def _on_belief(self, _payload: bytes | None) -> bus.Reply:
         return self._belief_reply(self.service.belief(), publish=False)
@@ -192,7 +176,7 @@ class LocalizerClient:
 
     def _query(self, suffix: str, payload: bytes | None, timeout_s: float) -> dict[str, Any]:
         key_expr = self.key(suffix)
-        message = bus.request_json(self.session, key_expr, BELIEF_FIELDS, payload, timeout_s)
+        message = bus.request_json(self.session, key_expr, {}, payload, timeout_s)
         return check_belief(key_expr, message)
 
     def belief(self) -> dict[str, Any]:
@@ -217,7 +201,7 @@ class LocalizerClient:
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:
-                message = bus.decode(key_expr, sample.payload.to_bytes(), BELIEF_FIELDS)
+                message = bus.decode(key_expr, sample.payload.to_bytes())
                 belief = check_belief(key_expr, message)
             except bus.BusMessageError as error:
                 _log.warning("skipping a publication: %s", error)

@@ -1,0 +1,33 @@
+"""Fixtures shared by the test folders: a small rendered map of the ``building`` world."""
+
+from __future__ import annotations
+
+import pytest
+
+WIDTH_PX = 512
+HEIGHT_PX = 96
+
+
+@pytest.fixture(scope="session")
+def building_map(tmp_path_factory: pytest.TempPathFactory):
+    """A small SIFT map of the rendered ``building`` world at 512 x 96 (spacing 1.5 m), with
+    its room graph: ``(db_path, dataset_dir)``."""
+    from mapdb.build import build_map
+    from mapdb.database import MapDatabase
+    from mapdb.dataset import read_edges, read_manifest
+    from mapdb.graph import connect_known_rooms
+    from robot.dataset import render_dataset
+    from robot.render import PanoramaCamera
+    from toploc.commands.map import resolve_extractor
+
+    root = tmp_path_factory.mktemp("building")
+    dataset = root / "dataset"
+    camera = PanoramaCamera(WIDTH_PX, HEIGHT_PX)
+    render_dataset(dataset, "building", spacing_m=1.5, camera=camera, progress=False)
+    db_path = root / "map.db"
+    with MapDatabase.open(db_path) as map_db:
+        build_map(
+            map_db, read_manifest(dataset), resolve_extractor(("sift",)), workers=0, progress=False
+        )
+        connect_known_rooms(map_db, read_edges(dataset))
+    return db_path, dataset
