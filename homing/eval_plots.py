@@ -41,7 +41,8 @@ def plot_home_vectors(
         ax.plot(*np.column_stack([p, home]), color="0.8", linestyle="--", linewidth=0.7)
         if np.isfinite(d):
             ax.arrow(
-                *p,
+                float(p[0]),
+                float(p[1]),
                 length * np.cos(d),
                 length * np.sin(d),
                 color="tab:red",
@@ -49,8 +50,10 @@ def plot_home_vectors(
                 head_width=0.025 * span,
                 length_includes_head=True,
             )
-    ax.scatter(*positions.T, s=30, facecolors="white", edgecolors="black", zorder=3)
-    ax.scatter(*home, s=90, color="tab:red", zorder=4, label="home")
+    ax.scatter(
+        positions[:, 0], positions[:, 1], s=30, facecolors="white", edgecolors="black", zorder=3
+    )
+    ax.scatter(home[0], home[1], s=90, color="tab:red", zorder=4, label="home")
     if labels is not None:
         for p, text in zip(positions, labels, strict=True):
             ax.annotate(text, p, textcoords="offset points", xytext=(3, 3), fontsize=6)

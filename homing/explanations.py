@@ -32,6 +32,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from scipy.stats import fisher_exact
 
 from homing.reference import ReferenceKey, reference_key, thesis_rows
@@ -80,7 +81,7 @@ def fisher_p_value(successes_a: int, runs_a: int, successes_b: int, runs_b: int)
     for name, k, n in (("a", successes_a, runs_a), ("b", successes_b, runs_b)):
         if not 0 <= k <= n or n < 1:
             raise ValueError(f"successes_{name}={k} must be in 0..runs_{name}={n}, runs >= 1")
-    table = [[successes_a, runs_a - successes_a], [successes_b, runs_b - successes_b]]
+    table = np.array([[successes_a, runs_a - successes_a], [successes_b, runs_b - successes_b]])
     return float(fisher_exact(table).pvalue)
 
 

@@ -29,7 +29,7 @@ Parameters come as a frozen :class:`ExtractionParams`; named presets are merged 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -146,7 +146,7 @@ def pad_circular(image: np.ndarray, margin_px: int) -> np.ndarray:
 
 
 def _sift(params: ExtractionParams) -> cv2.SIFT:
-    return cv2.SIFT_create(
+    return cv2.SIFT.create(
         nfeatures=0,
         nOctaveLayers=params.sift_n_octave_layers,
         contrastThreshold=params.sift_contrast_threshold,
@@ -158,7 +158,7 @@ def _sift(params: ExtractionParams) -> cv2.SIFT:
 
 def _mser_keypoints(padded: np.ndarray, params: ExtractionParams) -> list[cv2.KeyPoint]:
     """One upright keypoint per MSER region: centroid, size = major axis of its moment ellipse."""
-    mser = cv2.MSER_create(
+    mser = cv2.MSER.create(
         delta=params.mser_delta,
         min_area=params.mser_min_area,
         max_area=params.mser_max_area,
@@ -169,7 +169,7 @@ def _mser_keypoints(padded: np.ndarray, params: ExtractionParams) -> list[cv2.Ke
     for region, (x0, _, box_w, _) in zip(regions, boxes, strict=True):
         if params.wrap_margin_px > 0 and (x0 == 0 or x0 + box_w >= padded.shape[1]):
             continue  # cut off by the end of the circular padding: centroid would be wrong
-        pts = region.astype(np.float64)  # (n, 2) as (x, y)
+        pts = np.asarray(region, dtype=np.float64)  # (n, 2) as (x, y)
         centre = pts.mean(axis=0)
         cov = np.cov(pts, rowvar=False) if len(pts) > 1 else np.zeros((2, 2))
         size = max(4.0 * float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0))), 2.0)
@@ -193,15 +193,20 @@ def _pack_octave(size_px: float, shape: tuple[int, ...], params: ExtractionParam
     return octave | (layer << 8)
 
 
-def _detect(padded: np.ndarray, params: ExtractionParams) -> tuple[list[cv2.KeyPoint], Any]:
-    """Keypoints and SIFT descriptors on the padded image for the chosen detector."""
+def _detect(
+    padded: np.ndarray, params: ExtractionParams
+) -> tuple[Sequence[cv2.KeyPoint], np.ndarray | None]:
+    """Keypoints and SIFT descriptors (``None`` without keypoints) on the padded image for the
+    chosen detector."""
     sift = _sift(params)
     if params.detector == "sift":
-        return sift.detectAndCompute(padded, None)
-    keypoints = _mser_keypoints(padded, params)
-    if not keypoints:
-        return [], None
-    return sift.compute(padded, keypoints)
+        keypoints, descriptors = sift.detectAndCompute(padded, None)
+    else:
+        mser_keypoints = _mser_keypoints(padded, params)
+        if not mser_keypoints:
+            return [], None
+        keypoints, descriptors = sift.compute(padded, mser_keypoints)
+    return keypoints, None if descriptors is None else np.asarray(descriptors)
 
 
 def _seam_duplicates(

@@ -69,7 +69,7 @@ class PlaceIndex:
         descriptors = np.ascontiguousarray(table.descriptors, dtype=np.float32)
         flann = None
         if len(descriptors) > 0:
-            flann = cv2.flann_Index(
+            flann = cv2.flann.Index(
                 descriptors, {"algorithm": FLANN_INDEX_KDTREE, "trees": params.trees}
             )
         return cls(flann, table.keypoint_place_index, weights, descriptors, params)

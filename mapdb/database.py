@@ -199,8 +199,8 @@ class MapDatabase:
         room_id = self._room_id(name)
         if room_id is not None:
             return room_id
-        table = self.db["rooms"].insert({"name": name, "created_utc": utc_now_iso()})
-        return int(table.last_pk)
+        table = self.db.table("rooms").insert({"name": name, "created_utc": utc_now_iso()})
+        return _inserted_id(table)
 
     def add_room(self, name: str) -> int:
         """Add room ``name`` if it is new (one transaction); return its id."""
@@ -293,8 +293,10 @@ class MapDatabase:
                 "source": place.source,
                 "added_utc": utc_now_iso(),
             }
-            place_id = int(self.db["places"].insert(place_row).last_pk)
-            self.db["fingerprints"].insert_all([{**row, "place_id": place_id} for row in rows])
+            place_id = _inserted_id(self.db.table("places").insert(place_row))
+            self.db.table("fingerprints").insert_all(
+                [{**row, "place_id": place_id} for row in rows]
+            )
         return place_id
 
     def _place_id_for_image(self, image_sha256: str) -> int | None:
@@ -349,3 +351,10 @@ class MapDatabase:
 
 
 __all__ = ["SCHEMA_VERSION", "DuplicatePlaceError", "MapDatabase", "utc_now_iso"]
+
+
+def _inserted_id(table: sqlite_utils.db.Table) -> int:
+    """The rowid the last ``insert`` on ``table`` gave (sqlite-utils types it as optional)."""
+    if table.last_pk is None:
+        raise RuntimeError(f"insert into {table.name} returned no row id")
+    return int(table.last_pk)

@@ -20,7 +20,7 @@ from mapdb.records import RoomSummary
 
 def graph_from_rooms(rooms: Iterable[RoomSummary], edges: Iterable[tuple[str, str]]) -> nx.Graph:
     """Build the undirected room graph from room summaries and name pairs (pure)."""
-    graph = nx.Graph()
+    graph: nx.Graph[str] = nx.Graph()
     for room in rooms:
         graph.add_node(room.name, room_id=room.id, n_places=room.n_places)
     for room_a, room_b in edges:

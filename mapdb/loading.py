@@ -68,7 +68,18 @@ def load_fingerprints(map_db: MapDatabase, detector: str | None = None) -> list[
             place_id=row[0],
             room=row[1],
             alv_xy=(row[11], row[12]),
-            fingerprint=fingerprint_from_row(*row[2:11], params_of(row[13])),
+            fingerprint=fingerprint_from_row(
+                row[2],
+                row[3],
+                row[4],
+                row[5],
+                row[6],
+                row[7],
+                row[8],
+                row[9],
+                row[10],
+                params_of(row[13]),
+            ),
         )
         for row in _query(map_db, detector)
     ]

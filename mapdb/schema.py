@@ -41,7 +41,7 @@ def _v1_initial(db: sqlite_utils.Database) -> None:
         not_null={"name", "created_utc"},
         strict=True,
     )
-    db["rooms"].create_index(["name"], unique=True)
+    db.table("rooms").create_index(["name"], unique=True)
     db.create_table(
         "edges",
         {"room_a_id": int, "room_b_id": int, "created_utc": str},
@@ -50,7 +50,7 @@ def _v1_initial(db: sqlite_utils.Database) -> None:
         not_null={"room_a_id", "room_b_id", "created_utc"},
         strict=True,
     )
-    db["edges"].create_index(["room_b_id"])
+    db.table("edges").create_index(["room_b_id"])
     db.create_table(
         "places",
         {
@@ -78,8 +78,8 @@ def _v1_initial(db: sqlite_utils.Database) -> None:
         },
         strict=True,
     )
-    db["places"].create_index(["image_sha256"], unique=True)
-    db["places"].create_index(["room_id"])
+    db.table("places").create_index(["image_sha256"], unique=True)
+    db.table("places").create_index(["room_id"])
     db.create_table(
         "fingerprints",
         {
@@ -113,8 +113,8 @@ def _v1_initial(db: sqlite_utils.Database) -> None:
         },
         strict=True,
     )
-    db["fingerprints"].create_index(["place_id", "detector"], unique=True)
-    db["fingerprints"].create_index(["detector", "place_id"])
+    db.table("fingerprints").create_index(["place_id", "detector"], unique=True)
+    db.table("fingerprints").create_index(["detector", "place_id"])
 
 
 MIGRATIONS: tuple[Migration, ...] = (_v1_initial,)

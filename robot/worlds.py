@@ -22,8 +22,8 @@ from robot.world import WALL_SIDES, Box, Door, Material, Poster, Room, World
 
 WALL_TEXTURES = ("brick", "gravel", "moon", "coins", "text", "page", "grass")
 FLOOR_TEXTURES = ("gravel", "grass", "brick", "coins")
-PICTURES = ("astronaut", "chelsea", "coffee", "rocket", "camera", "cat", "clock", "hubble")
-PICTURES += ("cells", "colorwheel", "retina", "logo")
+PICTURES: tuple[str, ...] = ("astronaut", "chelsea", "coffee", "rocket", "camera", "cat")
+PICTURES += ("clock", "hubble", "cells", "colorwheel", "retina", "logo")
 
 Spans = dict[str, list[tuple[float, float]]]
 
@@ -45,7 +45,7 @@ def _posters(
     rng: np.random.Generator, room: Room, per_wall: int, avoid: Spans
 ) -> tuple[Poster, ...]:
     """Up to ``per_wall`` pictures per wall in even slots, clear of the ``avoid`` spans."""
-    posters = []
+    posters: list[Poster] = []
     for side in WALL_SIDES:
         length = room.size_m[1] if side[1] == "x" else room.size_m[0]
         slot = length / per_wall
@@ -209,7 +209,7 @@ def building_world(seed: int = 0) -> World:
         Door("seminar", "storage", -1.5),
     )
     office_b = dataclasses.replace(office, name="office_b", origin_m=(4.0, 2.2))
-    rooms = (corridor, office, office_b, kitchen, seminar, storage)
+    rooms: tuple[Room, ...] = (corridor, office, office_b, kitchen, seminar, storage)
     world = World("building", rooms, doors, place_spacing_m=1.0)
     per_wall = {"corridor": 5, "office_a": 2, "kitchen": 2, "seminar": 3, "storage": 2}
     world = _with_posters(world, rng, per_wall)

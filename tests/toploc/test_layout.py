@@ -1,0 +1,107 @@
+"""The shape of the code: imports point down the floors, and the cores load no I/O libraries.
+
+Floors, from the ground up (README, "Layout"): ``homing`` and the pure records
+(``mapdb.records``); ``mapdb``; ``localizer``; ``robot``; the shell ``toploc``. A module may
+import its own floor and the floors below it, never one above.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+PACKAGES = ("homing", "mapdb", "localizer", "robot", "toploc")
+FLOOR = {"homing": 0, "mapdb.records": 0, "mapdb": 1, "localizer": 2, "robot": 3, "toploc": 4}
+IO_LIBRARIES = ("sqlite3", "sqlite_utils", "zenoh", "serial", "click", "tqdm")
+
+
+def floor_of(module: str) -> int | None:
+    """The floor of a dotted module name of toploc's packages (``None`` for other libraries)."""
+    parts = module.split(".")
+    for length in range(len(parts), 0, -1):
+        floor = FLOOR.get(".".join(parts[:length]))
+        if floor is not None:
+            return floor
+    return None
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(REPO).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path) -> list[tuple[int, str]]:
+    """``(line, module)`` of every import in ``path``, relative imports resolved."""
+    package = module_name(path).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - node.level + 1] if node.level else []
+            module = ".".join([*base, *([node.module] if node.module else [])])
+            found += [(node.lineno, f"{module}.{alias.name}") for alias in node.names]
+    return found
+
+
+def upward_imports(paths: list[Path]) -> list[str]:
+    """Every import of a module on a higher floor than the importing one, as text."""
+    upward = []
+    for path in paths:
+        here = floor_of(module_name(path))
+        assert here is not None, path
+        for line, module in imported_modules(path):
+            there = floor_of(module)
+            if there is not None and there > here:
+                upward.append(f"{path.relative_to(REPO)}:{line} imports {module}")
+    return upward
+
+
+def source_files() -> list[Path]:
+    return sorted(p for package in PACKAGES for p in (REPO / package).rglob("*.py"))
+
+
+def test_every_package_module_is_on_a_floor() -> None:
+    assert all(floor_of(module_name(path)) is not None for path in source_files())
+
+
+def test_imports_point_down_the_floors() -> None:
+    assert upward_imports(source_files()) == []
+
+
+def test_the_check_sees_an_upward_import(tmp_path: Path) -> None:
+    bad = REPO / "localizer" / "_layout_probe.py"
+    try:
+        bad.write_text("from toploc.bus import encode\nfrom .belief import RoomBelief\n")
+        assert upward_imports([bad]) == ["localizer/_layout_probe.py:1 imports toploc.bus.encode"]
+    finally:
+        bad.unlink()
+
+
+def test_records_stand_on_the_ground_floor() -> None:
+    assert floor_of("mapdb.records.Place") == 0
+    assert floor_of("mapdb.database") == 1
+    assert floor_of("numpy") is None
+
+
+@pytest.mark.parametrize("package", ["homing", "localizer"])
+def test_a_core_loads_no_io_library(package: str) -> None:
+    # A fresh interpreter: the test process itself has loaded everything already.
+    probe = (
+        "import importlib, pkgutil, sys\n"
+        f"import {package}\n"
+        f"for info in pkgutil.iter_modules({package}.__path__):\n"
+        f"    importlib.import_module('{package}.' + info.name)\n"
+        f"print(' '.join(sorted(n for n in {IO_LIBRARIES!r} if n in sys.modules)))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    assert done.stdout.split() == []
