@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from homing.bearings import wrap_angle_deg
+
 
 class HomingError(ValueError):
     """Input from which no landmark vector or home vector can be computed."""
@@ -127,6 +129,5 @@ def direction_rad(vector: np.ndarray, min_length: float = 1e-12) -> float:
 
 def angular_error_deg(home_deg: np.ndarray | float, correct_deg: np.ndarray | float) -> np.ndarray:
     """Eq. 5.5: the absolute difference of two directions in degrees, in [0, 180]."""
-    difference = np.abs(np.asarray(correct_deg, dtype=float) - np.asarray(home_deg, dtype=float))
-    difference = np.mod(difference, 360.0)
-    return np.minimum(difference, 360.0 - difference)
+    difference = np.asarray(correct_deg, dtype=float) - np.asarray(home_deg, dtype=float)
+    return np.abs(wrap_angle_deg(difference))

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from homing.alv import HomingError, angular_error_deg, rotation_2d, unit_vectors_2d
+from homing.bearings import wrap_angle_rad
 from homing.compass import bearing_shift_rad
 
 FAILED_ERROR_DEG = 90.0
@@ -202,9 +203,9 @@ def wedge_vote_direction_rad(
         return float("nan")
     start = bearings_here_rad[m[:, 0]]
     end = bearings_home_rad[m[:, 1]] + rotation_rad + np.pi
-    span = np.angle(np.exp(1j * (end - start)))  # signed arc length in (-pi, pi]
+    span = wrap_angle_rad(end - start)  # signed arc length in (-pi, pi]
     centres = (np.arange(n_bins) + 0.5) * (2 * np.pi / n_bins)
-    offset = np.angle(np.exp(1j * (centres[None, :] - start[:, None])))  # (k, n_bins)
+    offset = wrap_angle_rad(centres[None, :] - start[:, None])  # (k, n_bins)
     inside = (offset * np.sign(span)[:, None] >= 0) & (np.abs(offset) <= np.abs(span)[:, None])
     votes = inside.sum(axis=0)
     best = centres[votes == votes.max()]

@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 
 from homing.alv import HomingError, alv_from_bearings, home_vector
+from homing.bearings import wrap_angle_rad
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
 from localizer.features import extract_preset
 from localizer.matching import match_descriptors
@@ -103,10 +104,6 @@ class HomeStep:
         return float(np.arctan2(self.home_xy[1], self.home_xy[0]))
 
 
-def _wrap(angle_rad: np.ndarray | float) -> np.ndarray:
-    return np.mod(np.asarray(angle_rad, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-
-
 def density_peak_rad(angles_rad: np.ndarray, sigma_deg: float = 4.0, bins: int = 360) -> float:
     """The mode of a circular density of ``angles_rad`` (von Mises kernel of about
     ``sigma_deg``), evaluated on ``bins`` directions; in (-pi, pi]."""
@@ -141,8 +138,8 @@ def matched_inliers(
         raise HomingError(f"only {len(pairs)} descriptor matches (need {params.min_matches})")
     here = current.bearings_rad[pairs[:, 0]]
     there = goal.bearings_rad[pairs[:, 1]]
-    peak = density_peak_rad(_wrap(here - there)) if shift_rad is None else shift_rad
-    inlier = np.abs(_wrap(here - there - peak)) <= math.radians(params.outlier_deg)
+    peak = density_peak_rad(wrap_angle_rad(here - there)) if shift_rad is None else shift_rad
+    inlier = np.abs(wrap_angle_rad(here - there - peak)) <= math.radians(params.outlier_deg)
     if inlier.sum() < params.min_matches:
         raise HomingError(f"only {int(inlier.sum())} matches agree on a rotation")
     if shift_rad is not None:
@@ -157,7 +154,9 @@ def _best_step(
     pairs, shift = matched_inliers(current, goal, params, shift_rad)
     alv_here = alv_from_bearings(current.bearings_rad[pairs[:, 0]])
     alv_goal = alv_from_bearings(goal.bearings_rad[pairs[:, 1]])
-    change = _wrap(current.bearings_rad[pairs[:, 0]] - goal.bearings_rad[pairs[:, 1]] - shift)
+    change = wrap_angle_rad(
+        current.bearings_rad[pairs[:, 0]] - goal.bearings_rad[pairs[:, 1]] - shift
+    )
     parallax = float(np.median(np.abs(change)))
     return HomeStep(home_vector(alv_here, alv_goal, 0.0, shift), shift, len(pairs), parallax)
 
@@ -289,7 +288,7 @@ def drive_home(
             return done(True, "arrived", current)
         goal_dir = step.direction_rad - step.shift_rad  # home direction in the goal view's frame
         if previous_goal_dir is not None:
-            turned = abs(float(_wrap(goal_dir - previous_goal_dir)))
+            turned = abs(float(wrap_angle_rad(goal_dir - previous_goal_dir)))
             reversed_ = turned > math.radians(p.reverse_deg)
             scale = scale * p.scale_down if reversed_ else min(1.0, scale * p.scale_up)
         previous_goal_dir = goal_dir
