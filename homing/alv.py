@@ -78,8 +78,16 @@ def average_landmark_vector(
 
 
 def alv_from_bearings(bearings_rad: np.ndarray | list[float]) -> np.ndarray:
-    """The 2-D ALV (robot frame) of landmarks seen at ``bearings_rad``."""
-    return average_landmark_vector(unit_vectors_2d(bearings_rad))
+    """The 2-D ALV (robot frame, unitless, norm <= 1) of landmarks seen at ``bearings_rad``.
+
+    The mean of ``(cos b, sin b)``, each component summed on its own (numpy's pairwise sum), so
+    the ALV stored with a map (:mod:`mapdb.codec`) is this one bit for bit. Raises
+    :class:`HomingError` for no bearings or non-finite ones.
+    """
+    bearings = _finite_1d(bearings_rad, "bearings_rad")
+    if bearings.size == 0:
+        raise HomingError("no landmarks: the ALV of an empty view is undefined")
+    return np.array([np.cos(bearings).mean(), np.sin(bearings).mean()])
 
 
 def rotation_2d(angle_rad: float) -> np.ndarray:
