@@ -12,7 +12,8 @@ to go but is not metres). Two variants:
   ratio test); the heading difference is the peak of the circular density of the matched
   bearing differences, matches further than ``outlier_deg`` from it are rejected, and the
   inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
-  over the inliers only, in both views (the same landmarks here and at the goal).
+  over the inliers only, in both views (the same landmarks here and at the goal):
+  :func:`homing.alv.matched_home_vector`.
 
 The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
 extract, step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
@@ -40,7 +41,7 @@ from typing import TYPE_CHECKING, Literal
 import cv2
 import numpy as np
 
-from homing.alv import HomingError, alv_from_bearings, home_vector
+from homing.alv import HomingError, alv_from_bearings, home_vector, matched_home_vector
 from homing.bearings import wrap_angle_rad
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
 from localizer.features import extract_preset
@@ -152,13 +153,13 @@ def _best_step(
     current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
 ) -> HomeStep:
     pairs, shift = matched_inliers(current, goal, params, shift_rad)
-    alv_here = alv_from_bearings(current.bearings_rad[pairs[:, 0]])
-    alv_goal = alv_from_bearings(goal.bearings_rad[pairs[:, 1]])
-    change = wrap_angle_rad(
-        current.bearings_rad[pairs[:, 0]] - goal.bearings_rad[pairs[:, 1]] - shift
-    )
-    parallax = float(np.median(np.abs(change)))
-    return HomeStep(home_vector(alv_here, alv_goal, 0.0, shift), shift, len(pairs), parallax)
+    here = current.bearings_rad[pairs[:, 0]]
+    there = goal.bearings_rad[pairs[:, 1]]
+    home = matched_home_vector(here, there, shift)
+    if not np.all(np.isfinite(home)):
+        raise HomingError(f"no home vector from {len(pairs)} inliers and rotation {shift} rad")
+    parallax = float(np.median(np.abs(wrap_angle_rad(here - there - shift))))
+    return HomeStep(home, shift, len(pairs), parallax)
 
 
 def home_step(
