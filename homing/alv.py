@@ -11,7 +11,13 @@ vector's length is not a distance: only its direction is meaningful.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
+
+from homing.bearings import wrap_angle_deg
+
+HomeFrame = Literal["here", "goal"]
 
 
 class HomingError(ValueError):
@@ -76,14 +82,75 @@ def average_landmark_vector(
 
 
 def alv_from_bearings(bearings_rad: np.ndarray | list[float]) -> np.ndarray:
-    """The 2-D ALV (robot frame) of landmarks seen at ``bearings_rad``."""
-    return average_landmark_vector(unit_vectors_2d(bearings_rad))
+    """The 2-D ALV (robot frame, unitless, norm <= 1) of landmarks seen at ``bearings_rad``.
+
+    The mean of ``(cos b, sin b)``, each component summed on its own (numpy's pairwise sum; the
+    ALV stored with every map fingerprint is this one, bit for bit). Raises
+    :class:`HomingError` for no bearings or non-finite ones.
+    """
+    bearings = _finite_1d(bearings_rad, "bearings_rad")
+    if bearings.size == 0:
+        raise HomingError("no landmarks: the ALV of an empty view is undefined")
+    return np.array([np.cos(bearings).mean(), np.sin(bearings).mean()])
 
 
 def rotation_2d(angle_rad: float) -> np.ndarray:
     """The 2x2 matrix rotating vectors counter-clockwise by ``angle_rad``."""
     c, s = np.cos(angle_rad), np.sin(angle_rad)
     return np.array([[c, -s], [s, c]])
+
+
+def rotate_vectors_2d(vectors: np.ndarray, angle_rad: np.ndarray | float) -> np.ndarray:
+    """Vectors (..., 2) rotated counter-clockwise by ``angle_rad`` (broadcast over ``...``)."""
+    v = np.asarray(vectors, dtype=float)
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def matched_home_vector(
+    bearings_here_rad: np.ndarray,
+    bearings_goal_rad: np.ndarray,
+    rotation_rad: np.ndarray | float,
+    matched: np.ndarray | None = None,
+    frame: HomeFrame = "here",
+) -> np.ndarray:
+    """The home vector (..., 2) from features seen both here and at the goal (eq. 2.6).
+
+    Entry ``j`` of ``bearings_here_rad`` and ``bearings_goal_rad`` (..., k) is one landmark (a
+    descriptor match, or a simulated feature's identity); ``matched`` (..., k, bool; default all)
+    says which entries were seen in both views. The ALV is taken over the matched landmarks in
+    each view, so unmatched clutter cannot bias it (Lambrinos et al. 2000), and
+    ``ALV(here) - R(rotation) ALV(goal)`` is returned. ``rotation_rad`` (...) is the compass
+    convention of :mod:`homing.compass`, goal -> here (a goal bearing ``b`` is seen at
+    ``b + rotation`` here); with matched features it is usually their circular mean bearing
+    change, :func:`homing.compass.matched_shift_rad`.
+
+    ``frame``: ``"here"`` expresses the vector in the current robot frame; ``"goal"`` in the
+    goal view's frame, i.e. turned by ``-rotation``: ``R(-rotation) ALV(here) - ALV(goal)``.
+    Unitless; NaN where nothing is matched or the rotation is NaN. Raises :class:`HomingError`
+    for bearing arrays of different shapes.
+    """
+    here = np.asarray(bearings_here_rad, dtype=float)
+    goal = np.asarray(bearings_goal_rad, dtype=float)
+    if here.shape != goal.shape:
+        raise HomingError(f"bearings here {here.shape} and at the goal {goal.shape} differ")
+    mask = np.ones(here.shape, dtype=bool) if matched is None else np.asarray(matched, dtype=bool)
+    count = mask.sum(axis=-1)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        alv_here = _masked_unit_sum(here, mask) / count
+        alv_goal = _masked_unit_sum(goal, mask) / count
+    if frame == "here":
+        return alv_here - rotate_vectors_2d(alv_goal, rotation_rad)
+    if frame == "goal":
+        return rotate_vectors_2d(alv_here, -np.asarray(rotation_rad)) - alv_goal
+    raise HomingError(f"unknown frame {frame!r}; use 'here' or 'goal'")
+
+
+def _masked_unit_sum(bearings_rad: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Sum (..., 2) of the unit vectors toward the bearings (..., k) where ``mask`` holds."""
+    x = np.where(mask, np.cos(bearings_rad), 0.0).sum(axis=-1)
+    y = np.where(mask, np.sin(bearings_rad), 0.0).sum(axis=-1)
+    return np.stack([x, y], axis=-1)
 
 
 def home_vector(
@@ -127,6 +194,5 @@ def direction_rad(vector: np.ndarray, min_length: float = 1e-12) -> float:
 
 def angular_error_deg(home_deg: np.ndarray | float, correct_deg: np.ndarray | float) -> np.ndarray:
     """Eq. 5.5: the absolute difference of two directions in degrees, in [0, 180]."""
-    difference = np.abs(np.asarray(correct_deg, dtype=float) - np.asarray(home_deg, dtype=float))
-    difference = np.mod(difference, 360.0)
-    return np.minimum(difference, 360.0 - difference)
+    difference = np.asarray(correct_deg, dtype=float) - np.asarray(home_deg, dtype=float)
+    return np.abs(wrap_angle_deg(difference))

@@ -27,9 +27,9 @@ from typing import Literal
 import numpy as np
 
 from homing.alv import HomingError
+from homing.bearings import TWO_PI, wrap_angle_rad
 
 CompassMethod = Literal["histogram", "smoothed"]
-TWO_PI = 2.0 * np.pi
 
 
 def bearing_histograms(
@@ -91,7 +91,7 @@ def shift_from_spectra(
             offset = np.where(curvature < 0, 0.5 * (left - right) / curvature, 0.0)
         shift += np.clip(offset, -0.5, 0.5)
     angle = shift * (TWO_PI / n_bins)
-    return np.mod(angle + np.pi, TWO_PI) - np.pi
+    return wrap_angle_rad(angle)
 
 
 def bearing_shift_rad(

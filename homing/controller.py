@@ -6,12 +6,13 @@ the distance to go, and the gain shrinks with the room (1e-6 m steps in a 50 m r
 fixes the rest:
 
 1. **Matched features only.** The home vector is the ALV difference over the features seen in
-   both views (:func:`matched_home_vectors`). The simulated features keep their identity from
-   view to view, as descriptor matches do on real images; fake features never match, so they
-   never enter, and with features removed both ALVs are taken over one set instead of two
-   random subsets. Each matched feature's term is a descent direction for the distance to the
-   goal, so even one or two matches point home. A view that matches nothing is not acted on:
-   the robot stays and looks again (the next view hides other features).
+   both views (:func:`matched_home_vectors`, by :func:`homing.alv.matched_home_vector`). The
+   simulated features keep their identity from view to view, as descriptor matches do on real
+   images; fake features never match, so they never enter, and with features removed both
+   ALVs are taken over one set instead of two random subsets. Each matched feature's term is a
+   descent direction for the distance to the goal, so even one or two matches point home. A
+   view that matches nothing is not acted on: the robot stays and looks again (the next view
+   hides other features).
 2. **Alignment.** A visual compass estimates the rotation ``delta`` of the current view against
    the goal view (the circular mean of matched bearing differences,
    :func:`homing.compass.matched_shift_rad`), and the current bearings are turned back by it.
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from homing.alv import matched_home_vector, rotate_vectors_2d
 from homing.compass import matched_shift_rad
 from homing.simulation import RunState, SimulationParams, Views
 
@@ -56,28 +58,18 @@ MIN_EVIDENCE_STEPS = 3
 FRAME_SETTLED = 0.7
 
 
-def _rotate(vectors: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.stack(
-        [c * vectors[:, 0] - s * vectors[:, 1], s * vectors[:, 0] + c * vectors[:, 1]], 1
-    )
-
-
-def _unit(bearing_rad: np.ndarray) -> np.ndarray:
-    return np.stack([np.cos(bearing_rad), np.sin(bearing_rad)], axis=-1)
-
-
 def matched_home_vectors(
     goal: Views, here: Views, features: int, held_delta_rad: np.ndarray, hold: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Home vectors (r, 2) in each goal view's frame from the features both views see.
 
     Columns ``0..features-1`` of both views are the world's features; the fake ones after them
-    are new in every view and never match, so they never enter. The home vector is the mean
-    over matched features of ``u_here(b - delta) - u_goal(b)``, the ALV difference restricted to
-    one feature set: each term is a descent direction for the distance to the goal (the
-    distance to a point is convex), so a few matches still point home, where the ALV of all
-    visible features would compare two different random subsets. ``delta`` is the compass
+    are new in every view and never match, so they never enter. The home vector is
+    :func:`homing.alv.matched_home_vector` in the goal view's frame, the ALV difference
+    restricted to one feature set, i.e. the mean over matched features of
+    ``u_here(b - delta) - u_goal(b)``: each term is a descent direction for the distance to the
+    goal (the distance to a point is convex), so a few matches still point home, where the ALV
+    of all visible features would compare two different random subsets. ``delta`` is the compass
     (:func:`homing.compass.matched_shift_rad`) where at least ``COMPASS_MIN_MATCHES`` match,
     else ``held_delta_rad`` (the last estimate: one or two matches would absorb the whole signal).
 
@@ -90,9 +82,7 @@ def matched_home_vectors(
     goal_b, here_b = goal.bearing_rad[:, :n], here.bearing_rad[:, :n]
     estimate = matched_shift_rad(goal_b, here_b, matched)
     delta = np.where((count >= COMPASS_MIN_MATCHES) & (not hold), estimate, held_delta_rad)
-    difference = _unit(here_b - delta[:, None]) - _unit(goal_b)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        home = (difference * matched[..., None]).sum(axis=1) / count[:, None]
+    home = matched_home_vector(here_b, goal_b, delta, matched, frame="goal")
     return home, delta, count
 
 
@@ -163,7 +153,7 @@ def best_controller(
     frame_rad = np.where(
         settled[rows, pick.astype(int)] > FRAME_SETTLED, np.arctan2(frame[:, 1], frame[:, 0]), 0.0
     )
-    move = _rotate(home, -frame_rad) * extra["gain"][:, None]
+    move = rotate_vectors_2d(home, -frame_rad) * extra["gain"][:, None]
     length = np.hypot(*move.T)
     with np.errstate(invalid="ignore", divide="ignore"):
         move *= np.where(length > MAX_STEP_M, MAX_STEP_M / length, 1.0)[:, None]

@@ -21,8 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from homing.alv import HomingError, angular_error_deg, rotation_2d, unit_vectors_2d
-from homing.compass import bearing_shift_rad
+from homing.alv import HomingError, angular_error_deg, matched_home_vector, rotate_vectors_2d
+from homing.bearings import wrap_angle_rad
+from homing.compass import bearing_shift_rad, matched_shift_rad
 
 FAILED_ERROR_DEG = 90.0
 """Error charged to a pair whose home vector is undefined (the expected error of a random move)."""
@@ -134,9 +135,7 @@ def alv_home_directions_rad(
     """
     here = np.asarray(alv_here, dtype=float)
     home = np.asarray(alv_home, dtype=float)
-    r = np.asarray(rotation_rad, dtype=float)
-    c, s = np.cos(r), np.sin(r)
-    rotated = np.column_stack([c * home[:, 0] - s * home[:, 1], s * home[:, 0] + c * home[:, 1]])
+    rotated = rotate_vectors_2d(home, np.asarray(rotation_rad, dtype=float))
     return _direction_or_nan(here - rotated)
 
 
@@ -148,17 +147,16 @@ def compass_rotation_rad(bearings_here_rad: np.ndarray, bearings_home_rad: np.nd
 def matched_rotation_rad(
     bearings_here_rad: np.ndarray, bearings_home_rad: np.ndarray, matches: np.ndarray
 ) -> float:
-    """Rotation home -> here from matched features: the circular mean of their bearing changes.
+    """Rotation home -> here from matched features: the circular mean of their bearing changes
+    (:func:`homing.compass.matched_shift_rad` for index-pair matches).
 
     ``matches`` (k, 2) holds ``[here_row, home_row]``. Parallax spreads the changes, but moving
     in any direction shifts features on opposite sides in opposite senses, so the mean is near
     the rotation. NaN when there are no matches.
     """
     m = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
-    if len(m) == 0:
-        return float("nan")
-    change = bearings_here_rad[m[:, 0]] - bearings_home_rad[m[:, 1]]
-    return float(np.arctan2(np.sin(change).sum(), np.cos(change).sum()))
+    here, home = bearings_here_rad[m[:, 0]], bearings_home_rad[m[:, 1]]
+    return float(matched_shift_rad(home, here, np.ones(len(m), dtype=bool)))
 
 
 def matched_alv_direction_rad(
@@ -167,18 +165,15 @@ def matched_alv_direction_rad(
     matches: np.ndarray,
     rotation_rad: float,
 ) -> float:
-    """Home direction (rad, current frame) from the ALVs of matched features only.
+    """Home direction (rad, current frame) of :func:`homing.alv.matched_home_vector`.
 
     With correct pairs the ALV difference is the mean of per-landmark difference vectors
     (Lambrinos et al. 2000), so unmatched clutter seen from only one place cannot bias it.
-    NaN without matches or with a zero home vector.
+    NaN without matches, with a NaN rotation or with a zero home vector.
     """
     m = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
-    if len(m) == 0 or not np.isfinite(rotation_rad):
-        return float("nan")
-    here = unit_vectors_2d(bearings_here_rad[m[:, 0]]).mean(axis=0)
-    home = rotation_2d(rotation_rad) @ unit_vectors_2d(bearings_home_rad[m[:, 1]]).mean(axis=0)
-    return float(_direction_or_nan(here - home))
+    here, home = bearings_here_rad[m[:, 0]], bearings_home_rad[m[:, 1]]
+    return float(_direction_or_nan(matched_home_vector(here, home, rotation_rad)))
 
 
 def wedge_vote_direction_rad(
@@ -202,9 +197,9 @@ def wedge_vote_direction_rad(
         return float("nan")
     start = bearings_here_rad[m[:, 0]]
     end = bearings_home_rad[m[:, 1]] + rotation_rad + np.pi
-    span = np.angle(np.exp(1j * (end - start)))  # signed arc length in (-pi, pi]
+    span = wrap_angle_rad(end - start)  # signed arc length in (-pi, pi]
     centres = (np.arange(n_bins) + 0.5) * (2 * np.pi / n_bins)
-    offset = np.angle(np.exp(1j * (centres[None, :] - start[:, None])))  # (k, n_bins)
+    offset = wrap_angle_rad(centres[None, :] - start[:, None])  # (k, n_bins)
     inside = (offset * np.sign(span)[:, None] >= 0) & (np.abs(offset) <= np.abs(span)[:, None])
     votes = inside.sum(axis=0)
     best = centres[votes == votes.max()]

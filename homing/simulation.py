@@ -30,6 +30,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from homing.alv import rotate_vectors_2d
+
 WORLD_WALLS: dict[int, tuple[int, ...]] = {1: (1, 2, 3, 4), 2: (3, 4), 3: (1, 3), 4: (3,)}
 
 
@@ -179,8 +181,7 @@ def project(
         alv /= count[:, None]
     rotation = rng.uniform(0.0, params.max_rotation_rad, runs)
     if params.max_rotation_rad > 0:
-        c, s = np.cos(rotation), np.sin(rotation)
-        alv = np.stack([c * alv[:, 0] - s * alv[:, 1], s * alv[:, 0] + c * alv[:, 1]], axis=1)
+        alv = rotate_vectors_2d(alv, rotation)
     bearing = np.arctan2(dy, dx) + rotation[:, None] if with_bearings else np.empty((runs, 0))
     return Views(bearing, visible, alv, count, rotation)
 

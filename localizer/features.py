@@ -1,7 +1,7 @@
 """Keypoints and descriptors on a cylindrical panorama: SIFT (DoG) and MSER, each with a bearing.
 
 ``extract(image, params)`` takes a grey ``uint8`` panorama (column 0 along the heading, columns
-clockwise; see :mod:`localizer.panorama`) and returns a :class:`~mapdb.records.Fingerprint`.
+clockwise; see :mod:`homing.bearings`) and returns a :class:`~mapdb.records.Fingerprint`.
 
 - ``"sift"``: Lowe's DoG keypoints with SIFT descriptors (``cv2.SIFT_create``).
 - ``"mser"``: maximally stable extremal regions (``cv2.MSER_create``); each region becomes a
@@ -36,13 +36,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from localizer.panorama import (
-    ROWS_SELECTIONS,
-    Cylinder,
-    bearing_rad_from_column,
-    horizon_band_mask,
-    rows_mask,
-)
+from homing.bearings import bearing_rad_from_column, wrap_angle_deg
+from localizer.panorama import ROWS_SELECTIONS, Cylinder, horizon_band_mask, rows_mask
 from mapdb.records import Fingerprint
 
 DETECTORS: tuple[str, ...] = ("sift", "mser")
@@ -219,7 +214,7 @@ def _seam_duplicates(
         for j in near[a_pos + 1 :]:
             dx = abs(xy[i, 0] - xy[j, 0])
             dx = min(dx, width_px - dx)
-            d_angle = abs((angle_deg[i] - angle_deg[j] + 180.0) % 360.0 - 180.0)
+            d_angle = abs(float(wrap_angle_deg(angle_deg[i] - angle_deg[j])))
             if (
                 dx < tol_px
                 and abs(xy[i, 1] - xy[j, 1]) < tol_px

@@ -1,9 +1,8 @@
-"""Geometry of a cylindrical 360° panorama: pixel columns ↔ bearings, rows ↔ elevations, row masks.
+"""Vertical geometry of a cylindrical 360° panorama: rows ↔ elevations, horizon band, row masks.
 
-Conventions (DESIGN.md, REP-103): the panorama is ``W`` columns for 360°; column 0 looks along the
-robot's heading and columns increase clockwise seen from above. OpenCV pixel coordinates put pixel
-centres at integers, so a point at ``x`` has robot-frame azimuth ``-2*pi*x/W`` (counter-clockwise
-positive), wrapped here to (-pi, pi]. Rows grow downwards; elevation is positive above the horizon.
+Conventions (DESIGN.md, REP-103): rows grow downwards (OpenCV pixel centres at integers);
+elevation is positive above the horizon. Columns ↔ bearings and angle wrapping are
+:mod:`homing.bearings` (one convention for the localizer, homing and the renderer).
 
 Everything here is pure numpy: scalars or arrays in, float arrays (or boolean masks) out.
 """
@@ -16,48 +15,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from homing.bearings import check_width_px
+
 RowsSelection = Literal["all", "lower", "upper"]
 ROWS_SELECTIONS: tuple[str, ...] = ("all", "lower", "upper")
-
-
-def wrap_angle_rad(angle_rad: ArrayLike) -> np.ndarray:
-    """Wrap angles in radians to the half-open interval (-pi, pi]."""
-    a = np.asarray(angle_rad, dtype=float)
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
-
-
-def _check_width(width_px: int) -> None:
-    if int(width_px) != width_px or width_px < 1:
-        raise ValueError(f"panorama width must be a positive integer of pixels, got {width_px!r}")
-
-
-def bearing_rad_from_column(x_px: ArrayLike, width_px: int) -> np.ndarray:
-    """Robot-frame azimuth (rad, CCW positive, in (-pi, pi]) of OpenCV column coordinate ``x_px``.
-
-    ``x_px`` may be fractional and outside [0, W): the panorama is periodic.
-    """
-    _check_width(width_px)
-    x = np.asarray(x_px, dtype=float)
-    return wrap_angle_rad(-2.0 * np.pi * x / width_px)
-
-
-def column_from_bearing(bearing_rad: ArrayLike, width_px: int) -> np.ndarray:
-    """OpenCV column coordinate in [0, W) that looks along robot-frame azimuth ``bearing_rad``."""
-    _check_width(width_px)
-    b = np.asarray(bearing_rad, dtype=float)
-    x = np.mod(-b * width_px / (2.0 * np.pi), float(width_px))
-    # np.mod can round a tiny negative value up to exactly W; fold it back onto column 0.
-    return np.where(x >= width_px, 0.0, x)
-
-
-def column_shift_px(delta_bearing_rad: float, width_px: int) -> float:
-    """Columns to roll a panorama by so that every bearing changes by ``delta_bearing_rad``.
-
-    ``np.roll(image, k, axis=1)`` moves content ``k`` columns right (clockwise), which changes
-    every bearing by ``-2*pi*k/W``; this returns that ``k`` (fractional) for a wanted change.
-    """
-    _check_width(width_px)
-    return -float(delta_bearing_rad) * width_px / (2.0 * np.pi)
 
 
 @dataclass(frozen=True)
@@ -78,7 +39,7 @@ class Cylinder:
     horizon_row_px: float | None = None
 
     def __post_init__(self) -> None:
-        _check_width(self.width_px)
+        check_width_px(self.width_px)
         if int(self.height_px) != self.height_px or self.height_px < 1:
             raise ValueError(f"panorama height must be a positive integer, got {self.height_px!r}")
         if self.focal_px is not None and not (np.isfinite(self.focal_px) and self.focal_px > 0):

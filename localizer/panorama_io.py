@@ -1,7 +1,7 @@
 """Read panoramas from disk: cylindrical images, and omnidirectional mirror images unwrapped.
 
 This is the I/O adapter of the localizer. Every image it returns is a 2-D ``uint8`` grey array in
-the panorama convention of :mod:`localizer.panorama` (column 0 along the heading, columns
+the panorama convention of :mod:`homing.bearings` (column 0 along the heading, columns
 increasing clockwise). Bad input raises :class:`PanoramaError` naming the file and the problem;
 files are checked before OpenCV sees them, so no crash comes from deep inside OpenCV.
 

@@ -1,6 +1,6 @@
 """Unit bearing rays of panorama keypoints, in the robot frame (REP-103: x forward, y left, z up).
 
-A keypoint at azimuth ``b`` (CCW from the heading, see :mod:`localizer.panorama`) and elevation
+A keypoint at azimuth ``b`` (CCW from the heading, see :mod:`homing.bearings`) and elevation
 ``e`` (positive up) has the unit ray ``(cos e cos b, cos e sin b, sin e)``. The elevation comes
 from the keypoint's row on the cylinder (:func:`localizer.panorama.elevation_rad_from_row`): focal
 length ``W / (2*pi)`` px and the horizon at the middle row unless the cylinder says otherwise.

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import pycolmap
 
-from localizer.panorama import wrap_angle_rad
+from homing.bearings import wrap_angle_rad
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
 

@@ -12,7 +12,8 @@ to go but is not metres). Two variants:
   ratio test); the heading difference is the peak of the circular density of the matched
   bearing differences, matches further than ``outlier_deg`` from it are rejected, and the
   inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
-  over the inliers only, in both views (the same landmarks here and at the goal).
+  over the inliers only, in both views (the same landmarks here and at the goal):
+  :func:`homing.alv.matched_home_vector`.
 
 The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
 extract, step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
@@ -40,7 +41,8 @@ from typing import TYPE_CHECKING, Literal
 import cv2
 import numpy as np
 
-from homing.alv import HomingError, alv_from_bearings, home_vector
+from homing.alv import HomingError, alv_from_bearings, home_vector, matched_home_vector
+from homing.bearings import wrap_angle_rad
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
 from localizer.features import extract_preset
 from localizer.matching import match_descriptors
@@ -103,10 +105,6 @@ class HomeStep:
         return float(np.arctan2(self.home_xy[1], self.home_xy[0]))
 
 
-def _wrap(angle_rad: np.ndarray | float) -> np.ndarray:
-    return np.mod(np.asarray(angle_rad, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-
-
 def density_peak_rad(angles_rad: np.ndarray, sigma_deg: float = 4.0, bins: int = 360) -> float:
     """The mode of a circular density of ``angles_rad`` (von Mises kernel of about
     ``sigma_deg``), evaluated on ``bins`` directions; in (-pi, pi]."""
@@ -141,8 +139,8 @@ def matched_inliers(
         raise HomingError(f"only {len(pairs)} descriptor matches (need {params.min_matches})")
     here = current.bearings_rad[pairs[:, 0]]
     there = goal.bearings_rad[pairs[:, 1]]
-    peak = density_peak_rad(_wrap(here - there)) if shift_rad is None else shift_rad
-    inlier = np.abs(_wrap(here - there - peak)) <= math.radians(params.outlier_deg)
+    peak = density_peak_rad(wrap_angle_rad(here - there)) if shift_rad is None else shift_rad
+    inlier = np.abs(wrap_angle_rad(here - there - peak)) <= math.radians(params.outlier_deg)
     if inlier.sum() < params.min_matches:
         raise HomingError(f"only {int(inlier.sum())} matches agree on a rotation")
     if shift_rad is not None:
@@ -155,11 +153,13 @@ def _best_step(
     current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
 ) -> HomeStep:
     pairs, shift = matched_inliers(current, goal, params, shift_rad)
-    alv_here = alv_from_bearings(current.bearings_rad[pairs[:, 0]])
-    alv_goal = alv_from_bearings(goal.bearings_rad[pairs[:, 1]])
-    change = _wrap(current.bearings_rad[pairs[:, 0]] - goal.bearings_rad[pairs[:, 1]] - shift)
-    parallax = float(np.median(np.abs(change)))
-    return HomeStep(home_vector(alv_here, alv_goal, 0.0, shift), shift, len(pairs), parallax)
+    here = current.bearings_rad[pairs[:, 0]]
+    there = goal.bearings_rad[pairs[:, 1]]
+    home = matched_home_vector(here, there, shift)
+    if not np.all(np.isfinite(home)):
+        raise HomingError(f"no home vector from {len(pairs)} inliers and rotation {shift} rad")
+    parallax = float(np.median(np.abs(wrap_angle_rad(here - there - shift))))
+    return HomeStep(home, shift, len(pairs), parallax)
 
 
 def home_step(
@@ -289,7 +289,7 @@ def drive_home(
             return done(True, "arrived", current)
         goal_dir = step.direction_rad - step.shift_rad  # home direction in the goal view's frame
         if previous_goal_dir is not None:
-            turned = abs(float(_wrap(goal_dir - previous_goal_dir)))
+            turned = abs(float(wrap_angle_rad(goal_dir - previous_goal_dir)))
             reversed_ = turned > math.radians(p.reverse_deg)
             scale = scale * p.scale_down if reversed_ else min(1.0, scale * p.scale_up)
         previous_goal_dir = goal_dir

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from homing.alv import alv_from_bearings
 from mapdb.records import Fingerprint, ParamValue
 
 KEYPOINTS_DTYPE = np.dtype("<f4")
@@ -26,16 +27,18 @@ DESCRIPTOR_STORAGE = {"u1": np.dtype("u1"), "f4": DESCRIPTORS_DTYPE}
 """Stored descriptor element types by their ``descriptor_dtype`` code."""
 
 
-def alv_from_bearings(bearings_rad: np.ndarray) -> np.ndarray:
-    """Average landmark vector: the mean of unit vectors ``(cos b, sin b)``, robot frame.
+def stored_alv(bearings_rad: np.ndarray) -> np.ndarray:
+    """The ALV stored in a row's ``alv_x``, ``alv_y``: :func:`homing.alv.alv_from_bearings`.
 
-    ``bearings_rad`` is ``(n,)`` in radians (REP-103, CCW from the heading). Returns a float64
-    2-vector ``(x, y)`` (unitless, norm <= 1); ``(0, 0)`` when there are no bearings.
+    ``bearings_rad`` is ``(n,)`` in radians (REP-103, CCW from the heading); the ALV is a float64
+    2-vector ``(x, y)`` in the robot frame (unitless, norm <= 1). A fingerprint with no keypoints
+    has no ALV (homing raises :class:`homing.alv.HomingError`), but the columns are NOT NULL and
+    maps have always stored ``(0, 0)`` for it, so it keeps ``(0, 0)``.
     """
     bearings = np.asarray(bearings_rad, dtype=np.float64)
     if bearings.size == 0:
-        return np.zeros(2)
-    return np.array([np.cos(bearings).mean(), np.sin(bearings).mean()])
+        return np.zeros(2)  # no keypoints: the stored ALV stays (0, 0)
+    return alv_from_bearings(bearings)
 
 
 def descriptor_storage(descriptors: np.ndarray) -> str:
@@ -71,7 +74,7 @@ def fingerprint_to_row(fingerprint: Fingerprint) -> dict[str, Any]:
             f"descriptors of detector {fingerprint.detector!r} must be 2-D (n, d), "
             f"got shape {descriptors.shape}"
         )
-    alv = alv_from_bearings(fingerprint.bearings_rad)
+    alv = stored_alv(fingerprint.bearings_rad)  # (0, 0) for a fingerprint with no keypoints
     code = descriptor_storage(descriptors)
     return {
         "detector": fingerprint.detector,

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from homing.bearings import wrap_angle_deg
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
@@ -46,12 +47,6 @@ class ManifestRow:
     x_m: float | None
     y_m: float | None
     heading_deg: float | None
-
-
-def _wrap_deg(angle_deg: float) -> float:
-    """Angle in degrees wrapped to (-180, 180]."""
-    wrapped = math.remainder(angle_deg, 360.0)
-    return 180.0 if wrapped == -180.0 else wrapped
 
 
 def _prepare_folder(out_dir: Path, overwrite: bool) -> None:
@@ -106,7 +101,7 @@ def render_dataset(
     rows = []
     for i, place in enumerate(tqdm(places, desc=f"{world_name}/{condition}", disable=not progress)):
         heading = float(rng.uniform(-180.0, 180.0)) if heading_deg is None else heading_deg
-        heading = _wrap_deg(heading)
+        heading = float(wrap_angle_deg(heading))  # (-180, 180]
         pose = world.building_pose(place.room, Pose2D(place.x_m, place.y_m, math.radians(heading)))
         image = render_panorama(scene, pose, camera, cond, seed=(seed, 2, i), grey=grey)
         name = f"images/{place.room}_{per_room[place.room]:03d}.png"

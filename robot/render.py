@@ -2,10 +2,11 @@
 
 Camera model. A panorama is ``width_px`` columns for 360°. Column 0 looks along the robot heading
 and columns increase clockwise, so the pixel centre at OpenCV x coordinate ``x`` has robot-frame
-azimuth ``-2*pi*x/W`` (REP-103: counter-clockwise positive). Row ``y`` (pixel centres at integers,
-0 at the top) has elevation ``atan((cy - y) / f)`` with ``cy = (H - 1) / 2``, where ``f`` is the
-cylinder focal length in pixels: ``W / (2*pi)`` (square pixels) unless a vertical field of view
-is given, in which case ``f = (H / 2) / tan(vfov / 2)``.
+azimuth ``-2*pi*x/W`` (REP-103: counter-clockwise positive; :mod:`homing.bearings` converts
+columns and bearings). Row ``y`` (pixel centres at integers, 0 at the top) has elevation
+``atan((cy - y) / f)`` with ``cy = (H - 1) / 2``, where ``f`` is the cylinder focal length in
+pixels: ``W / (2*pi)`` (square pixels) unless a vertical field of view is given, in which case
+``f = (H / 2) / tan(vfov / 2)``.
 
 Ray casting. A ray has horizontal unit direction, so its parameter ``t`` is the horizontal
 distance in metres. Walls and box sides (vertical quads) are intersected per column, and only the
@@ -27,18 +28,6 @@ import numpy as np
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
 from robot.scene import Scene
 from robot.world import Pose2D
-
-
-def bearing_from_column(x_px: np.ndarray | float, width_px: int) -> np.ndarray:
-    """Robot-frame azimuth (rad, CCW, wrapped to (-pi, pi]) of panorama x coordinate ``x_px``."""
-    bearing = -2.0 * np.pi * np.asarray(x_px, dtype=float) / width_px
-    return np.pi - np.mod(np.pi - bearing, 2.0 * np.pi)
-
-
-def column_from_bearing(bearing_rad: np.ndarray | float, width_px: int) -> np.ndarray:
-    """Panorama x coordinate in [0, W) of robot-frame azimuth ``bearing_rad`` (CCW positive)."""
-    x = np.mod(-np.asarray(bearing_rad, dtype=float) * width_px / (2.0 * np.pi), width_px)
-    return np.where(x >= width_px, 0.0, x)  # mod can round up to W for tiny negative inputs
 
 
 @dataclass(frozen=True)

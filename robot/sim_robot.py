@@ -25,6 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from homing.bearings import wrap_angle_rad
 from localizer.robot_protocol import Capture, MoveResult, Odometry
 from robot.conditions import Condition, get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
@@ -52,12 +53,6 @@ class MotionNoise:
     def __post_init__(self) -> None:
         if not (self.forward_frac >= 0 and self.turn_frac >= 0):
             raise ValueError(f"motion noise fractions must be >= 0, got {self}")
-
-
-def _wrap_rad(angle_rad: float) -> float:
-    """Angle wrapped to (-pi, pi]."""
-    wrapped = math.remainder(angle_rad, 2.0 * math.pi)
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 def wall_segments(world: World) -> np.ndarray:
@@ -230,7 +225,8 @@ class SimulatedRobot:
             )
         self._scene = build_scene(self.world)
         self._rng = np.random.default_rng([seed, 11])
-        self._pose = Pose2D(float(pose.x_m), float(pose.y_m), _wrap_rad(pose.heading_rad))
+        heading_rad = float(wrap_angle_rad(pose.heading_rad))
+        self._pose = Pose2D(float(pose.x_m), float(pose.y_m), heading_rad)
         self._odom = Odometry(0.0, 0.0, 0.0)
         self._captures = 0
         self._clock_s = 0.0
@@ -311,7 +307,7 @@ class SimulatedRobot:
             )
         real_turn = turn_rad * (1.0 + self._rng.normal(0.0, self.noise.turn_frac))
         real_forward = forward_m * (1.0 + self._rng.normal(0.0, self.noise.forward_frac))
-        heading = _wrap_rad(self._pose.heading_rad + real_turn)
+        heading = float(wrap_angle_rad(self._pose.heading_rad + real_turn))
         driven, bumped = self.obstacles.reach_m(self._pose, heading, real_forward)
         self._pose = Pose2D(
             float(self._pose.x_m + driven * math.cos(heading)),
@@ -320,7 +316,7 @@ class SimulatedRobot:
         )
         self.distance_driven_m += abs(driven)
         reported = forward_m * (driven / real_forward) if real_forward != 0 else forward_m
-        odom_heading = _wrap_rad(self._odom.heading_rad + turn_rad)
+        odom_heading = float(wrap_angle_rad(self._odom.heading_rad + turn_rad))
         self._odom = Odometry(
             self._odom.x_m + reported * math.cos(odom_heading),
             self._odom.y_m + reported * math.sin(odom_heading),

@@ -14,6 +14,8 @@ from homing.alv import (
     cylinder_vectors_3d,
     direction_rad,
     home_vector,
+    matched_home_vector,
+    rotate_vectors_2d,
     unit_vectors_2d,
 )
 
@@ -128,3 +130,53 @@ def test_weighted_alv_leans_to_heavy_landmarks():
 )
 def test_angular_error_of_eq_5_5(home_deg, correct_deg, error_deg):
     assert angular_error_deg(home_deg, correct_deg) == pytest.approx(error_deg)
+
+
+def _loop_matched_home(here, goal, rotation, matched):
+    """The obvious version: mean over matched features of u(b_here) - R(rotation) u(b_goal)."""
+    total, count = np.zeros(2), 0
+    for b_here, b_goal, seen in zip(here, goal, matched, strict=True):
+        if seen:
+            turned = b_goal + rotation
+            total += [np.cos(b_here) - np.cos(turned), np.sin(b_here) - np.sin(turned)]
+            count += 1
+    return total / count if count else np.full(2, np.nan)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 30),
+    seed=st.integers(0, 2**32 - 1),
+    rotation=st.floats(-np.pi, np.pi),
+)
+def test_matched_home_vector_is_the_mean_of_matched_differences(n, seed, rotation):
+    rng = np.random.default_rng(seed)
+    here, goal = rng.uniform(-np.pi, np.pi, (2, n))
+    matched = rng.random(n) < 0.6
+    expected = _loop_matched_home(here, goal, rotation, matched)
+    found = matched_home_vector(here, goal, rotation, matched)
+    np.testing.assert_allclose(found, expected, atol=1e-12)
+    in_goal = matched_home_vector(here, goal, rotation, matched, frame="goal")
+    np.testing.assert_allclose(in_goal, rotate_vectors_2d(expected, -rotation), atol=1e-12)
+
+
+def test_matched_home_vector_of_all_features_is_the_home_vector():
+    rng = np.random.default_rng(3)
+    here, goal = rng.uniform(-np.pi, np.pi, (2, 12))
+    expected = home_vector(alv_from_bearings(here), alv_from_bearings(goal), 0.0, 0.7)
+    np.testing.assert_allclose(matched_home_vector(here, goal, 0.7), expected, atol=1e-15)
+
+
+def test_matched_home_vector_batches_rows_and_rejects_mismatched_shapes():
+    rng = np.random.default_rng(4)
+    here, goal = rng.uniform(-np.pi, np.pi, (2, 3, 8))
+    matched = rng.random((3, 8)) < 0.5
+    matched[2] = False
+    rotation = np.array([0.1, -2.0, 0.5])
+    batch = matched_home_vector(here, goal, rotation, matched)
+    for row in range(2):
+        single = matched_home_vector(here[row], goal[row], rotation[row], matched[row])
+        np.testing.assert_allclose(batch[row], single)
+    assert np.all(np.isnan(batch[2]))
+    with pytest.raises(HomingError, match="differ"):
+        matched_home_vector(here[0], goal[0, :5], 0.0)

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from homing.bearings import wrap_angle_rad
 from localizer.evidence import EvidenceParams, PlaceEvidence, QueryEvidence, place_evidence
 from localizer.features import extract_preset
-from localizer.panorama import wrap_angle_rad
 from localizer.rays import rays_from_fingerprint
 from localizer.verification import verify
 from mapdb.database import MapDatabase

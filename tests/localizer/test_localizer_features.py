@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from homing.bearings import wrap_angle_rad
 from localizer.features import (
     ExtractionParams,
     extract,
@@ -12,7 +13,7 @@ from localizer.features import (
     pad_circular,
     params_from_preset,
 )
-from localizer.panorama import Cylinder, elevation_rad_from_row, wrap_angle_rad
+from localizer.panorama import Cylinder, elevation_rad_from_row
 from mapdb.records import Fingerprint
 
 DETECTORS = ["sift", "mser"]

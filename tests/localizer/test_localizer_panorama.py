@@ -1,4 +1,4 @@
-"""Panorama geometry: columns ↔ bearings, rows ↔ elevations, band and half masks."""
+"""Panorama geometry: rows ↔ elevations, band and half masks (columns: test_homing_bearings)."""
 
 from __future__ import annotations
 
@@ -7,61 +7,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from homing.bearings import bearing_rad_from_column
 from localizer.panorama import (
     Cylinder,
-    bearing_rad_from_column,
-    column_from_bearing,
-    column_shift_px,
     elevation_rad_from_row,
     horizon_band_mask,
     row_from_elevation,
     rows_mask,
-    wrap_angle_rad,
 )
-
-widths = st.integers(min_value=1, max_value=8192)
-
-
-def circular_diff(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
-    return np.abs((np.asarray(a) - np.asarray(b) + period / 2) % period - period / 2)
-
-
-@given(width=widths, frac=st.floats(min_value=0.0, max_value=1.0, exclude_max=True))
-def test_column_bearing_round_trip(width: int, frac: float) -> None:
-    x = frac * width
-    back = column_from_bearing(bearing_rad_from_column(x, width), width)
-    assert 0.0 <= back < width
-    assert circular_diff(back, x, width) < 1e-9 * width
-
-
-@given(width=widths, bearing=st.floats(min_value=-np.pi, max_value=np.pi, exclude_min=True))
-def test_bearing_column_round_trip(width: int, bearing: float) -> None:
-    back = bearing_rad_from_column(column_from_bearing(bearing, width), width)
-    assert -np.pi < back <= np.pi
-    assert circular_diff(back, bearing, 2 * np.pi) < 1e-9
-
-
-@given(x=st.floats(min_value=-1e6, max_value=1e6), width=widths)
-def test_bearing_is_wrapped(x: float, width: int) -> None:
-    b = bearing_rad_from_column(x, width)
-    assert -np.pi < b <= np.pi
-
-
-def test_bearing_convention_clockwise_columns() -> None:
-    w = 400
-    b = bearing_rad_from_column([0.0, 100.0, 200.0, 300.0], w)
-    # Column 0 ahead, a quarter turn of columns is the robot's right (-90°), half is behind (+pi).
-    np.testing.assert_allclose(b, [0.0, -np.pi / 2, np.pi, np.pi / 2])
-    assert wrap_angle_rad(-np.pi) == pytest.approx(np.pi)
-
-
-def test_column_shift_matches_roll() -> None:
-    w = 360
-    k = column_shift_px(np.deg2rad(-10.0), w)  # 10° clockwise = 10 columns right
-    assert k == pytest.approx(10.0)
-    x = np.array([5.0, 355.0])
-    shifted = bearing_rad_from_column(x + k, w) - bearing_rad_from_column(x, w)
-    np.testing.assert_allclose(wrap_angle_rad(shifted), np.deg2rad(-10.0))
 
 
 @given(

@@ -9,13 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robot.render import (
-    PanoramaCamera,
-    bearing_from_column,
-    cast_rays,
-    column_from_bearing,
-    render_panorama,
-)
+from homing.bearings import bearing_rad_from_column, column_from_bearing
+from robot.render import PanoramaCamera, cast_rays, render_panorama
 from robot.scene import Scene, build_scene
 from robot.world import Box, Door, Material, Pose2D, Room, World, capture_places
 from robot.worlds import make_world
@@ -51,7 +46,7 @@ def column_distance(a: float, b: float, width_px: int) -> float:
 @given(x=st.floats(0.0, 1023.999), width=st.sampled_from([64, 256, 1000, 1024]))
 def test_column_bearing_round_trip(x: float, width: int) -> None:
     x = x % width
-    bearing = bearing_from_column(x, width)
+    bearing = bearing_rad_from_column(x, width)
     assert -np.pi < bearing <= np.pi
     assert column_distance(float(column_from_bearing(bearing, width)), x, width) < 1e-6
 
