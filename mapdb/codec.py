@@ -23,7 +23,7 @@ from mapdb.records import Fingerprint, ParamValue
 KEYPOINTS_DTYPE = np.dtype("<f4")
 BEARINGS_DTYPE = np.dtype("<f8")
 DESCRIPTORS_DTYPE = np.dtype("<f4")
-DESCRIPTOR_STORAGE = {"u1": np.dtype("u1"), "f4": DESCRIPTORS_DTYPE}
+DESCRIPTOR_STORAGE: dict[str, np.dtype[Any]] = {"u1": np.dtype("u1"), "f4": DESCRIPTORS_DTYPE}
 """Stored descriptor element types by their ``descriptor_dtype`` code."""
 
 

@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from localizer.panorama import Cylinder, wrap_angle_rad
+from homing.bearings import wrap_angle_rad
+from localizer.panorama import Cylinder
 from localizer.rays import rays_from_angles, rays_from_fingerprint
 from localizer.verification import (
     Verification,
