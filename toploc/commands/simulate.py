@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +19,7 @@ from homing.experiments import (
     settings,
 )
 from homing.report import agreement, format_tables, summarise_explanations
+from mapdb.workers import spawn_process_pool
 
 
 def _tasks(
@@ -48,9 +47,7 @@ def run_simulation(
     bar = tqdm(total=len(tasks), desc="simulating", unit="setting", disable=not progress)
     rows: list[dict[str, Any]] = []
     if jobs > 1:
-        # Spawn, as mapdb's build does: the CLI process has imported OpenCV, and a fork after
-        # its threads start can deadlock the child.
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with spawn_process_pool(jobs) as pool:  # the CLI process has imported OpenCV
             for row in pool.map(run_row, tasks, chunksize=4):
                 rows.append(row)
                 bar.update()

@@ -23,9 +23,7 @@ few features, so this happens for MSER pairs.
 from __future__ import annotations
 
 import math
-import multiprocessing
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +50,7 @@ from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
+from mapdb.workers import spawn_process_pool
 
 METHODS: tuple[str, ...] = ("thesis", "best", "alv-compass", "matched-alv", "matched-vote")
 BEST_METHOD = "matched-alv"
@@ -140,8 +139,7 @@ def extract_fingerprints(
                 results.append(extract(read_panorama(path), params))
                 bar.update()
             return results
-        context = multiprocessing.get_context("spawn")  # never fork: OpenCV threads can hang
-        with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        with spawn_process_pool(workers) as pool:
             futures = [pool.submit(_extract_one, path, params) for path in paths]
             results = []
             for future in futures:
