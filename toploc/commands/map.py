@@ -5,19 +5,17 @@ Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` 
 (the map stays consistent; re-running completes it). Also runnable as
 ``python -m toploc.commands.map``.
 
-Feature extraction is :func:`extract_panorama` (``localizer.panorama_io`` + ``localizer.features``)
-unless the environment variable ``TOPLOC_MAP_EXTRACTOR`` names another one as
-``module:function`` with the same signature (used by tests and benchmarks).
+Feature extraction is :func:`extract_panorama` (``localizer.panorama_io`` + ``localizer.features``),
+bound to the chosen presets by :func:`resolve_extractor`.
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 import json
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -31,7 +29,6 @@ from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import Fingerprint, MapInfo
 
-EXTRACTOR_ENV = "TOPLOC_MAP_EXTRACTOR"
 DEFAULT_DETECTORS = "sift,mser"
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
@@ -69,13 +66,8 @@ def parse_detectors(text: str) -> tuple[str, ...]:
 
 
 def resolve_extractor(presets: tuple[str, ...]) -> Extractor:
-    """The picklable ``extract(path)`` for ``presets`` (honours ``TOPLOC_MAP_EXTRACTOR``)."""
-    spec = os.environ.get(EXTRACTOR_ENV)
-    function: Callable[..., list[Fingerprint]] = extract_panorama
-    if spec:
-        module_name, _, attribute = spec.partition(":")
-        function = getattr(importlib.import_module(module_name), attribute)
-    return functools.partial(function, presets=presets)
+    """The picklable ``extract(path)``: :func:`extract_panorama` bound to ``presets``."""
+    return functools.partial(extract_panorama, presets=presets)
 
 
 @contextmanager
