@@ -23,7 +23,7 @@ from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.world import World
-from toploc.commands.map import resolve_extractor
+from toploc.extraction import resolve_extractor
 
 HOME_ENV = "TOPLOC_HOME"
 

@@ -21,9 +21,9 @@ def rng() -> np.random.Generator:
 @pytest.fixture
 def fake_extractor(monkeypatch: pytest.MonkeyPatch) -> None:
     """``toploc map`` run in this process extracts with ``mapdb_fake_extractor.fake_extract``."""
-    from toploc.commands import map as map_cli
+    from toploc import extraction
 
-    monkeypatch.setattr(map_cli, "extract_panorama", fake_extract)
+    monkeypatch.setattr(extraction, "extract_panorama", fake_extract)
 
 
 @pytest.fixture

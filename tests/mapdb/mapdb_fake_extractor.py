@@ -4,7 +4,7 @@
 ``ValueError`` naming it, like ``PanoramaError``) and returns one synthetic Fingerprint per preset,
 seeded by the image bytes. ``slow_extract`` sleeps ``TOPLOC_FAKE_EXTRACT_DELAY_S`` seconds first
 (so a test can kill a build mid-way). In-process CLI tests put ``fake_extract`` in place of
-``toploc.commands.map.extract_panorama`` (the ``fake_extractor`` fixture); a CLI subprocess runs
+``toploc.extraction.extract_panorama`` (the ``fake_extractor`` fixture); a CLI subprocess runs
 ``python -m mapdb_cli_with_fake_extractor``.
 """
 

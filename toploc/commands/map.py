@@ -5,13 +5,12 @@ Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` 
 (the map stays consistent; re-running completes it). Also runnable as
 ``python -m toploc.commands.map``.
 
-Feature extraction is :func:`extract_panorama` (``localizer.panorama_io`` + ``localizer.features``),
-bound to the chosen presets by :func:`resolve_extractor`.
+Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.panorama_io`` +
+``localizer.features``), bound to the chosen presets by ``resolve_extractor``.
 """
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import sys
@@ -22,31 +21,17 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
+from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import Fingerprint, MapInfo
+from mapdb.records import MapInfo
+from toploc.extraction import resolve_extractor
 
 DEFAULT_DETECTORS = "sift,mser"
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
-
-
-def extract_panorama(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
-    """Read the cylindrical panorama at ``path`` and extract one fingerprint per preset.
-
-    Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file.
-    """
-    import cv2
-
-    from localizer.features import extract_preset
-    from localizer.panorama_io import read_panorama
-
-    cv2.setNumThreads(1)  # one process per core already
-    image = read_panorama(path)
-    return [extract_preset(image, preset) for preset in presets]
 
 
 def parse_detectors(text: str) -> tuple[str, ...]:
@@ -63,11 +48,6 @@ def parse_detectors(text: str) -> tuple[str, ...]:
     if len(set(detectors)) != len(detectors):
         raise click.BadParameter(f"each detector may appear once, got {', '.join(presets)}")
     return presets
-
-
-def resolve_extractor(presets: tuple[str, ...]) -> Extractor:
-    """The picklable ``extract(path)``: :func:`extract_panorama` bound to ``presets``."""
-    return functools.partial(extract_panorama, presets=presets)
 
 
 @contextmanager
