@@ -29,7 +29,6 @@ import resource
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,6 +40,7 @@ from localizer.retrieval import PlaceIndex
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table
 from mapdb.records import Fingerprint, FingerprintTable, NewPlace
+from mapdb.workers import spawn_process_pool
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
@@ -115,7 +115,7 @@ def render_all(items: Sequence[Shot], workers: int) -> Iterator[Fingerprint]:
     if workers <= 1:
         yield from map(render_fingerprint, items)
         return
-    with ProcessPoolExecutor(workers) as pool:
+    with spawn_process_pool(workers) as pool:
         yield from pool.map(render_fingerprint, items, chunksize=8)
 
 

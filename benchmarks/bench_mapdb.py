@@ -27,7 +27,8 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import read_manifest
 from mapdb.loading import load_fingerprint_table, load_fingerprints
 from mapdb.records import Fingerprint, NewPlace
-from toploc.commands.map import parse_detectors, resolve_extractor
+from toploc.commands.map import parse_detectors
+from toploc.extraction import resolve_extractor
 
 
 def render_panorama(seed: int, width_px: int, height_px: int) -> np.ndarray:

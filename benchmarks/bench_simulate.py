@@ -16,7 +16,7 @@ import numpy as np
 
 from homing.alv import alv_from_bearings
 from homing.experiments import EXPERIMENTS
-from toploc.commands.simulate import run_simulation
+from toploc.evaluation.simulation import run_simulation
 
 
 def main() -> None:
@@ -30,7 +30,7 @@ def main() -> None:
     alv_us = 1e6 * timeit.timeit(lambda: alv_from_bearings(bearings), number=repeats) / repeats
 
     start = time.perf_counter()
-    rows = run_simulation(list(EXPERIMENTS), runs=args.runs, jobs=args.jobs)
+    rows = run_simulation(list(EXPERIMENTS), runs=args.runs, jobs=args.jobs).rows
     wall_s = time.perf_counter() - start
 
     print(f"{'measure':<52} {'value':>12}")

@@ -9,5 +9,6 @@ imports nothing, so that ``mapdb.records`` stays free of SQLite):
 - ``mapdb.loading``: every fingerprint in one query, or the whole map as a ``MapSnapshot``.
 - ``mapdb.graph``: the room graph as networkx / GraphML.
 - ``mapdb.dataset`` + ``mapdb.build``: import a dataset folder with an injected extractor.
+- ``mapdb.workers``: the spawned process pool every parallel step of toploc uses.
 - ``mapdb.errors``: every failure, naming the file, room or column.
 """

@@ -4,10 +4,11 @@ The pipeline (``build_map``):
 
 1. Hash every image (SHA-256 of the file bytes) in the parent; an image already in the map, or
    repeated in the dataset, is *skipped* and said so; an unreadable file *failed*.
-2. Extract fingerprints with the injected ``extract(path) -> list[Fingerprint]`` in a
-   ``ProcessPoolExecutor`` (at most ``2 * workers`` images in flight, so memory stays bounded);
-   ``workers <= 1`` runs in-process. ``extract`` must be picklable (a module-level function or a
-   ``functools.partial`` of one) and raises (e.g. ``ValueError``) for a bad image: *failed*.
+2. Extract fingerprints with the injected ``extract(path) -> list[Fingerprint]`` in a spawned
+   process pool (:func:`mapdb.workers.spawn_process_pool`; at most ``2 * workers`` images in
+   flight, so memory stays bounded); ``workers <= 1`` runs in-process. ``extract`` must be
+   picklable (a module-level function or a ``functools.partial`` of one) and raises (e.g.
+   ``ValueError``) for a bad image: *failed*.
 3. The parent writes each place with its fingerprints in one transaction (all or nothing).
 
 Interrupting (Ctrl-C) or killing the process loses at most the places not yet committed; every
@@ -18,9 +19,8 @@ lock, read-only) and a dead worker process stop the build with a
 
 from __future__ import annotations
 
-import multiprocessing
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import closing
 from dataclasses import dataclass, field
@@ -34,6 +34,7 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import ManifestEntry, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
+from mapdb.workers import spawn_process_pool
 
 Extractor = Callable[[Path], list[Fingerprint]]
 
@@ -148,9 +149,7 @@ def _extract_parallel(
 ) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
     """Results as they complete, with at most ``2 * workers`` jobs submitted at a time."""
     pending = iter(jobs)
-    # Spawn, not fork: a forked child of a process whose OpenCV thread pool is running can
-    # deadlock on a lock held by a thread that does not exist in the child.
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    pool = spawn_process_pool(workers)
     in_flight: dict[Future[list[Fingerprint]], _Job] = {}
     finished = False
 

@@ -10,6 +10,7 @@ Layout of the folder::
 ``image`` is relative to the folder. ``x_m``, ``y_m`` and ``heading_deg`` are in the frame of the
 place's room: origin at the room's floor corner of smallest building x and y, axes parallel to
 the building axes (REP-103, heading counter-clockwise from the room's +x axis, in (-180, 180]).
+The format is :mod:`mapdb.dataset`'s; read a dataset back with :func:`mapdb.dataset.read_manifest`.
 """
 
 from __future__ import annotations
@@ -27,15 +28,12 @@ import numpy as np
 from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
+from mapdb.dataset import EDGES_NAME, MANIFEST_COLUMNS, MANIFEST_NAME
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
 from robot.world import Pose2D, capture_places
 from robot.worlds import make_world
-
-MANIFEST_NAME = "manifest.csv"
-MANIFEST_HEADER = ("image", "room", "x_m", "y_m", "heading_deg")
-EDGES_NAME = "edges.csv"
 
 
 @dataclass(frozen=True)
@@ -137,21 +135,8 @@ def write_manifest(path: Path, rows: list[ManifestRow]) -> Path:
     """Write ``rows`` as a manifest CSV (empty cells for unknown values); return ``path``."""
     with path.open("w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(MANIFEST_HEADER)
+        writer.writerow(MANIFEST_COLUMNS)
         for r in rows:
             values = (r.x_m, r.y_m, r.heading_deg)
             writer.writerow([r.image, r.room, *("" if v is None else repr(v) for v in values)])
     return path
-
-
-def read_manifest(path: str | Path) -> list[ManifestRow]:
-    """Read a manifest CSV; ``ValueError`` if its header is not ``MANIFEST_HEADER``."""
-    with Path(path).open(newline="") as f:
-        reader = csv.reader(f)
-        header = tuple(next(reader, ()))
-        if header != MANIFEST_HEADER:
-            raise ValueError(f"{path}: header must be {','.join(MANIFEST_HEADER)}, got {header}")
-        return [
-            ManifestRow(image, room, *(float(v) if v else None for v in (x, y, h)))
-            for image, room, x, y, h in reader
-        ]

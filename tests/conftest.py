@@ -18,7 +18,7 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     from mapdb.graph import connect_known_rooms
     from robot.dataset import render_dataset
     from robot.render import PanoramaCamera
-    from toploc.commands.map import resolve_extractor
+    from toploc.extraction import resolve_extractor
 
     root = tmp_path_factory.mktemp("building")
     dataset = root / "dataset"

@@ -16,14 +16,14 @@ from pathlib import Path
 from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
-from mapdb.dataset import read_edges, read_manifest
+from mapdb.dataset import MANIFEST_NAME, read_edges, read_manifest
 from mapdb.graph import connect_known_rooms
 from mapdb.loading import load_snapshot
-from robot.dataset import MANIFEST_NAME, render_dataset
+from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.world import World
-from toploc.commands.map import resolve_extractor
+from toploc.extraction import resolve_extractor
 
 HOME_ENV = "TOPLOC_HOME"
 

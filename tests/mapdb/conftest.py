@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mapdb_fake_extractor import fake_extract
 from mapdb_helpers import make_fingerprint, new_place, write_image
 
 from mapdb.database import MapDatabase
@@ -15,6 +16,14 @@ from mapdb.database import MapDatabase
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+@pytest.fixture
+def fake_extractor(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``toploc map`` run in this process extracts with ``mapdb_fake_extractor.fake_extract``."""
+    from toploc import extraction
+
+    monkeypatch.setattr(extraction, "extract_panorama", fake_extract)
 
 
 @pytest.fixture

@@ -3,7 +3,9 @@
 ``fake_extract(path, presets)`` decodes the image with OpenCV (a corrupt file raises
 ``ValueError`` naming it, like ``PanoramaError``) and returns one synthetic Fingerprint per preset,
 seeded by the image bytes. ``slow_extract`` sleeps ``TOPLOC_FAKE_EXTRACT_DELAY_S`` seconds first
-(so a test can kill a build mid-way). Selected in the CLI by ``TOPLOC_MAP_EXTRACTOR``.
+(so a test can kill a build mid-way). In-process CLI tests put ``fake_extract`` in place of
+``toploc.extraction.extract_panorama`` (the ``fake_extractor`` fixture); a CLI subprocess runs
+``python -m mapdb_cli_with_fake_extractor``.
 """
 
 from __future__ import annotations

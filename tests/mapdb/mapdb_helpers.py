@@ -10,9 +10,6 @@ import numpy as np
 
 from mapdb.records import Fingerprint, NewPlace
 
-FAKE_EXTRACTOR = "mapdb_fake_extractor:fake_extract"
-SLOW_EXTRACTOR = "mapdb_fake_extractor:slow_extract"
-
 
 def make_fingerprint(
     rng: np.random.Generator, detector: str = "sift", n: int = 10, dim: int = 128

@@ -14,14 +14,7 @@ from mapdb_helpers import assert_consistent, table_counts, write_image
 
 from mapdb.database import MapDatabase
 from toploc.commands import map as map_cli
-from toploc.commands.map import EXTRACTOR_ENV, map_group
-
-FAKE = "mapdb_fake_extractor:fake_extract"
-
-
-@pytest.fixture
-def fake_extractor(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv(EXTRACTOR_ENV, FAKE)
+from toploc.commands.map import map_group
 
 
 def run(*args: str | Path) -> Result:
@@ -217,8 +210,7 @@ def _real_extraction_available() -> bool:
 
 
 @pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
-def test_build_with_real_extraction(tmp_path: Path, db_path: Path, monkeypatch) -> None:
-    monkeypatch.delenv(EXTRACTOR_ENV, raising=False)
+def test_build_with_real_extraction(tmp_path: Path, db_path: Path) -> None:
     folder = tmp_path / "real"
     lines = ["image,room,x_m,y_m,heading_deg"]
     for i in range(3):

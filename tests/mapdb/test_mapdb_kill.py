@@ -1,5 +1,9 @@
 """A real ``kill -9`` (and Ctrl-C) of ``toploc map build`` in a subprocess: the map stays
-consistent, and re-running the build completes it."""
+consistent, and re-running the build completes it.
+
+The subprocess runs the real CLI through ``mapdb_cli_with_fake_extractor`` (a slow fake
+extractor, so the build can be stopped mid-way).
+"""
 
 from __future__ import annotations
 
@@ -15,7 +19,7 @@ import pytest
 from click.testing import CliRunner
 from mapdb_helpers import assert_consistent, table_counts
 
-from toploc.commands.map import EXTRACTOR_ENV, map_group
+from toploc.commands.map import map_group
 
 REPO = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).resolve().parent
@@ -34,6 +38,7 @@ def places_so_far(db_path: Path) -> int:
 
 
 @pytest.mark.skipif(not hasattr(os, "killpg"), reason="needs POSIX process groups")
+@pytest.mark.usefixtures("fake_extractor")
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGINT], ids=["kill-9", "ctrl-c"])
 def test_signal_mid_build_then_rerun_completes(
     make_dataset, db_path: Path, signum: signal.Signals
@@ -42,10 +47,9 @@ def test_signal_mid_build_then_rerun_completes(
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(REPO), str(HERE)]),
-        EXTRACTOR_ENV: "mapdb_fake_extractor:slow_extract",
         "TOPLOC_FAKE_EXTRACT_DELAY_S": "0.25",
     }
-    command = [sys.executable, "-m", "toploc.commands.map", "build", str(dataset),
+    command = [sys.executable, "-m", "mapdb_cli_with_fake_extractor", "build", str(dataset),
                "--db", str(db_path), "--workers", "2", "--no-progress"]  # fmt: skip
     process = subprocess.Popen(
         command,
@@ -74,8 +78,7 @@ def test_signal_mid_build_then_rerun_completes(
     assert 3 <= killed["places"] < N_IMAGES
     assert_consistent(db_path)
 
-    env_fast = {EXTRACTOR_ENV: "mapdb_fake_extractor:fake_extract"}
-    result = CliRunner(env=env_fast).invoke(
+    result = CliRunner().invoke(
         map_group, ["build", str(dataset), "--db", str(db_path), "--no-progress"]
     )
     assert result.exit_code == 0, result.output

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from mapdb.dataset import MANIFEST_COLUMNS, read_manifest
 from robot.conditions import get_condition
-from robot.dataset import MANIFEST_HEADER, read_manifest, render_dataset
+from robot.dataset import render_dataset
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
 from robot.world import Pose2D, capture_places
@@ -32,8 +33,8 @@ def test_manifest_rows_match_images(tmp_path: Path) -> None:
     manifest = render_tiny(tmp_path / "ds", heading_deg=30.0)
     assert manifest == tmp_path / "ds" / "manifest.csv"
     with manifest.open() as f:
-        assert tuple(next(csv.reader(f))) == MANIFEST_HEADER
-    rows = read_manifest(manifest)
+        assert tuple(next(csv.reader(f))) == MANIFEST_COLUMNS
+    rows = read_manifest(manifest.parent)
     world = make_world("square")
     places = capture_places(world, 1.0)
     assert [(r.room, r.x_m, r.y_m) for r in rows] == [(p.room, p.x_m, p.y_m) for p in places]
@@ -61,7 +62,7 @@ def test_a_building_dataset_lists_the_rooms_joined_by_doors(tmp_path: Path) -> N
 
 
 def test_random_headings_and_grey(tmp_path: Path) -> None:
-    rows = read_manifest(render_tiny(tmp_path / "ds", heading_deg=None, grey=True, seed=2))
+    rows = read_manifest(render_tiny(tmp_path / "ds", heading_deg=None, grey=True, seed=2).parent)
     headings = [r.heading_deg for r in rows]
     assert all(h is not None and -180 < h <= 180 for h in headings)
     assert len(set(headings)) == len(headings)
@@ -86,7 +87,7 @@ def test_non_empty_folder_needs_overwrite(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="is not empty"):
         render_tiny(out)
     manifest = render_tiny(out, overwrite=True)
-    rows = read_manifest(manifest)
+    rows = read_manifest(manifest.parent)
     assert sorted(p.name for p in (out / "images").iterdir()) == sorted(
         Path(r.image).name for r in rows
     )
@@ -98,7 +99,7 @@ def test_cli_render(tmp_path: Path) -> None:
     result = CliRunner().invoke(dataset, [*args, "--height", "16", "--condition", "dim"])
     assert result.exit_code == 0, result.output
     assert str(out / "manifest.csv") in result.output
-    rows = read_manifest(out / "manifest.csv")
+    rows = read_manifest(out)
     assert f"square: {len(rows)} places" in result.output
     again = CliRunner().invoke(dataset, args)
     assert again.exit_code != 0 and "not empty" in again.output

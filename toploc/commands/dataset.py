@@ -80,7 +80,8 @@ def render(
     overwrite: bool,
 ) -> None:
     """Render a panorama at every capture place of a preset world into the folder OUT."""
-    from robot.dataset import read_manifest, render_dataset
+    from mapdb.dataset import read_manifest
+    from robot.dataset import render_dataset
     from robot.render import PanoramaCamera
 
     try:
@@ -97,7 +98,7 @@ def render(
         )
     except ValueError as error:
         raise click.ClickException(str(error)) from error
-    rows = read_manifest(manifest)
+    rows = read_manifest(manifest.parent)
     click.echo(f"wrote {len(rows)} panoramas and {manifest}")
     for room, count in Counter(row.room for row in rows).items():
         click.echo(f"  {room}: {count} places")

@@ -18,16 +18,18 @@ import numpy as np
 
 from localizer.features import DETECTORS, ExtractionParams
 from localizer.panorama_io import PanoramaError
+from mapdb.dataset import ManifestEntry
 from mapdb.errors import MapDatabaseError
 from toploc.evaluation.homing import (
     BEST_METHOD,
     METHODS,
     EvaluationError,
     HomingRun,
-    Place,
     evaluate_homing,
     extract_fingerprints,
+    headings_rad,
     load_places,
+    positions_m,
 )
 
 
@@ -85,7 +87,7 @@ def load_and_extract(
     rows: str,
     workers: int,
     progress: bool,
-) -> tuple[tuple[Place, ...], list, float]:
+) -> tuple[tuple[ManifestEntry, ...], list, float]:
     """The places of ``dataset``, their fingerprints, and the extraction time in seconds."""
     params = ExtractionParams(detector=detector, band_deg=band_deg, rows=rows)
     places = load_places(dataset)
@@ -101,14 +103,14 @@ def _plot(run: HomingRun, path: Path, title: str) -> None:
     home = next(k for k, p in enumerate(run.places) if p.image == home_image)
     room = run.places[home].room
     members = [k for k, p in enumerate(run.places) if p.room == room]
+    headings = headings_rad(run.places)
     directions = np.full(len(members), np.nan)
     for row, k in enumerate(members):
         chosen = np.flatnonzero((run.here == k) & (run.home == home))
-        heading = run.places[k].heading_rad
-        if len(chosen) and heading is not None:
-            directions[row] = run.home_direction_rad[chosen[0]] + heading
+        if len(chosen) and not np.isnan(headings[k]):
+            directions[row] = run.home_direction_rad[chosen[0]] + headings[k]
     plot_home_vectors(
-        np.array([run.places[k].position_m for k in members]),
+        positions_m(run.places)[members],
         members.index(home),
         directions,
         path,

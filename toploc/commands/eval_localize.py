@@ -8,11 +8,7 @@ import json
 from pathlib import Path
 
 import click
-from tqdm import tqdm
 
-from localizer.localizer import Localizer
-from localizer.panorama_io import read_panorama
-from mapdb.dataset import read_manifest
 from toploc.commands.localize import (
     db_option,
     detector_option,
@@ -20,39 +16,11 @@ from toploc.commands.localize import (
     load_localizer,
     localizer_errors,
 )
-from toploc.evaluation.localization import QueryOutcome, format_confusion, score_localization
-
-
-def _dataset_outcomes(localizer: Localizer, dataset: Path, progress: bool) -> list[QueryOutcome]:
-    entries = read_manifest(dataset)
-    outcomes = []
-    for entry in tqdm(entries, desc="localize", unit="pano", disable=not progress):
-        belief, observation = localizer.localize_once(read_panorama(entry.path))
-        outcomes.append(
-            QueryOutcome(
-                entry.image, entry.room, belief.top[0], str(belief.state), observation.timing_ms
-            )
-        )
-    return outcomes
-
-
-def _leave_one_out_outcomes(localizer: Localizer, progress: bool) -> list[QueryOutcome]:
-    outcomes = []
-    for place in tqdm(localizer.map.places, desc="leave-one-out", disable=not progress):
-        localizer.reset()
-        fingerprint = localizer.map.fingerprint(place.id)
-        observation = localizer.observe_fingerprint(fingerprint, exclude=place.id)
-        belief = localizer.update(observation)
-        outcomes.append(
-            QueryOutcome(
-                f"place {place.id}",
-                place.room,
-                belief.top[0],
-                str(belief.state),
-                observation.timing_ms,
-            )
-        )
-    return outcomes
+from toploc.evaluation.localization import (
+    format_confusion,
+    localize_dataset,
+    localize_leave_one_out,
+)
 
 
 @click.command("localize")
@@ -86,11 +54,11 @@ def localize_command(
     with localizer_errors():
         localizer = load_localizer(db_path, detector, index)
         if leave_one_out:
-            outcomes = _leave_one_out_outcomes(localizer, progress)
+            run = localize_leave_one_out(localizer, progress)
         else:
             assert dataset is not None
-            outcomes = _dataset_outcomes(localizer, dataset, progress)
-        score = score_localization(outcomes)
+            run = localize_dataset(localizer, dataset, progress)
+    score = run.score
     click.echo(
         f"n {score.n}: top-1 room {score.top1:.1%}, ambiguous {score.ambiguous_rate:.1%}, "
         f"{score.ms_median:.0f} ms median / {score.ms_p95:.0f} ms p95 per query "

@@ -5,51 +5,33 @@ Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` 
 (the map stays consistent; re-running completes it). Also runnable as
 ``python -m toploc.commands.map``.
 
-Feature extraction is :func:`extract_panorama` (``localizer.panorama_io`` + ``localizer.features``)
-unless the environment variable ``TOPLOC_MAP_EXTRACTOR`` names another one as
-``module:function`` with the same signature (used by tests and benchmarks).
+Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.panorama_io`` +
+``localizer.features``), bound to the chosen presets by ``resolve_extractor``.
 """
 
 from __future__ import annotations
 
-import functools
-import importlib
 import json
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import click
 from tqdm import tqdm
 
-from mapdb.build import BuildReport, Extractor, Outcome, Status, build_map
+from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import Fingerprint, MapInfo
+from mapdb.records import MapInfo
+from toploc.extraction import resolve_extractor
 
-EXTRACTOR_ENV = "TOPLOC_MAP_EXTRACTOR"
 DEFAULT_DETECTORS = "sift,mser"
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
-
-
-def extract_panorama(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
-    """Read the cylindrical panorama at ``path`` and extract one fingerprint per preset.
-
-    Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file.
-    """
-    import cv2
-
-    from localizer.features import extract_preset
-    from localizer.panorama_io import read_panorama
-
-    cv2.setNumThreads(1)  # one process per core already
-    image = read_panorama(path)
-    return [extract_preset(image, preset) for preset in presets]
 
 
 def parse_detectors(text: str) -> tuple[str, ...]:
@@ -66,16 +48,6 @@ def parse_detectors(text: str) -> tuple[str, ...]:
     if len(set(detectors)) != len(detectors):
         raise click.BadParameter(f"each detector may appear once, got {', '.join(presets)}")
     return presets
-
-
-def resolve_extractor(presets: tuple[str, ...]) -> Extractor:
-    """The picklable ``extract(path)`` for ``presets`` (honours ``TOPLOC_MAP_EXTRACTOR``)."""
-    spec = os.environ.get(EXTRACTOR_ENV)
-    function: Callable[..., list[Fingerprint]] = extract_panorama
-    if spec:
-        module_name, _, attribute = spec.partition(":")
-        function = getattr(importlib.import_module(module_name), attribute)
-    return functools.partial(function, presets=presets)
 
 
 @contextmanager

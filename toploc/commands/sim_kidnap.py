@@ -5,77 +5,18 @@ it find out where it is, driving to disambiguate (issue 5, section 3).
 from __future__ import annotations
 
 import json
-import statistics
-import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import click
 from tqdm import tqdm
 
-from localizer.active import ActiveParams, ActiveResult, localize_actively
-from localizer.belief import LocalizationState
-from localizer.localizer import Localizer, LocalizerConfig
 from localizer.policy import POLICIES
 from robot.conditions import CONDITIONS
-from robot.worlds import make_world
-from toploc.maps import ensure_world_map, kidnapped_robot, load_map
-
-# The rooms a kidnapped robot is put in, per world: its look-alike rooms.
-KIDNAP_ROOMS = {"building": ("office_a", "office_b")}
+from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, run_kidnappings
 
 
-@dataclass(frozen=True)
-class Trial:
-    """One kidnapping: where the robot really was and how localization ended."""
-
-    trial: int
-    true_room: str
-    result: ActiveResult
-    seconds: float
-
-    @property
-    def success(self) -> bool:
-        """Localized, and in the right room."""
-        final = self.result.final
-        return final.state is LocalizationState.LOCALIZED and final.top[0] == self.true_room
-
-    def to_json(self) -> dict[str, Any]:
-        final = self.result.final
-        return {
-            "trial": self.trial,
-            "true_room": self.true_room,
-            "first_belief": self.result.first.to_json(),
-            "final_belief": final.to_json(),
-            "final_room": final.top[0],
-            "final_state": str(final.state),
-            "steps": len(self.result.visits),
-            "visited": [v.place_id for v in self.result.visits],
-            "homing": [v.homing.reason for v in self.result.visits],
-            "distance_m": self.result.distance_m,
-            "frames": self.result.frames,
-            "success": self.success,
-            "seconds": self.seconds,
-        }
-
-
-def totals(trials: list[Trial]) -> dict[str, Any]:
-    """Success rate, first-look accuracy and means over the trials."""
-    n = len(trials)
-    return {
-        "trials": n,
-        "success_rate": sum(t.success for t in trials) / n,
-        "first_look_right": sum(t.result.first.top[0] == t.true_room for t in trials) / n,
-        "first_look_ambiguous": sum(
-            t.result.first.state is LocalizationState.AMBIGUOUS for t in trials
-        )
-        / n,
-        "mean_steps": statistics.fmean(len(t.result.visits) for t in trials),
-        "mean_distance_m": statistics.fmean(t.result.distance_m for t in trials),
-        "mean_frames": statistics.fmean(t.result.frames for t in trials),
-        "mean_seconds": statistics.fmean(t.seconds for t in trials),
-    }
+def _print_trial(trial: Trial) -> None:
+    tqdm.write(trial.describe())
 
 
 @click.command("kidnap")
@@ -122,28 +63,18 @@ def kidnap(
     Per trial: true room, final belief, steps (places driven to), distance driven, frames used,
     success (localized in the right room); then the totals.
     """
-    db = db_path or ensure_world_map(world)
-    localizer = Localizer(load_map(db), LocalizerConfig())
-    scene_world = make_world(world)
-    params = ActiveParams(max_targets=max_targets)
-    rooms = KIDNAP_ROOMS[world]
-    done: list[Trial] = []
-    for i in tqdm(range(trials), desc=f"kidnap/{policy}", unit="trial"):
-        true_room = rooms[i % len(rooms)]
-        robot = kidnapped_robot(
-            scene_world, true_room, seed * 100_000 + i, db, motion_noise, condition
-        )
-        start = time.perf_counter()
-        result = localize_actively(localizer, robot, policy, params)
-        trial = Trial(i, true_room, result, time.perf_counter() - start)
-        done.append(trial)
-        final = result.final
-        tqdm.write(
-            f"trial {i:2d}: in {true_room:9s} -> {final.top[0]:9s} p={final.top[1]:.3f} "
-            f"{final.state!s:9s} steps {len(result.visits)} {result.distance_m:5.2f} m "
-            f"{result.frames:3d} frames {'ok' if trial.success else 'FAILED'}"
-        )
-    summary = totals(done)
+    run = run_kidnappings(
+        world,
+        trials,
+        policy=policy,
+        seed=seed,
+        db_path=db_path,
+        condition=condition,
+        motion_noise=motion_noise,
+        max_targets=max_targets,
+        on_trial=_print_trial,
+    )
+    summary = run.totals()
     click.echo(
         f"{policy}: success {summary['success_rate']:.0%} of {trials}, "
         f"first look right {summary['first_look_right']:.0%} "
@@ -153,7 +84,5 @@ def kidnap(
         f"mean frames {summary['mean_frames']:.1f}, {summary['mean_seconds']:.1f} s per trial"
     )
     if json_path is not None:
-        report = {"world": world, "policy": policy, "seed": seed, "condition": condition}
-        report |= {"trials": [t.to_json() for t in done], "totals": summary}
-        json_path.write_text(json.dumps(report, indent=2) + "\n")
+        json_path.write_text(json.dumps(run.to_json(), indent=2) + "\n")
         click.echo(f"wrote {json_path}")

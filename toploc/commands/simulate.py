@@ -3,63 +3,15 @@
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 import click
-from tqdm import tqdm
 
-from homing.experiments import (
-    EXPERIMENTS,
-    WORLDS,
-    Setting,
-    run_row,
-    run_setting,
-    settings,
-)
-from homing.report import agreement, format_tables, summarise_explanations
-
-
-def _tasks(
-    experiments: list[str], worlds: tuple[int, ...], methods: list[str], runs: int, seed: int
-) -> list[tuple[Setting, str, int, int]]:
-    return [
-        (setting, method, runs, seed)
-        for experiment in experiments
-        for setting in settings(experiment, worlds)
-        for method in methods
-    ]
-
-
-def run_simulation(
-    experiments: list[str],
-    worlds: tuple[int, ...] = WORLDS,
-    methods: tuple[str, ...] = ("thesis", "best"),
-    runs: int = 20,
-    seed: int = 0,
-    jobs: int = 1,
-    progress: bool = False,
-) -> list[dict[str, Any]]:
-    """Every row of the chosen experiments, in table order, on ``jobs`` processes."""
-    tasks = _tasks(experiments, worlds, list(methods), runs, seed)
-    bar = tqdm(total=len(tasks), desc="simulating", unit="setting", disable=not progress)
-    rows: list[dict[str, Any]] = []
-    if jobs > 1:
-        # Spawn, as mapdb's build does: the CLI process has imported OpenCV, and a fork after
-        # its threads start can deadlock the child.
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            for row in pool.map(run_row, tasks, chunksize=4):
-                rows.append(row)
-                bar.update()
-    else:
-        for task in tasks:
-            rows.append(run_row(task))
-            bar.update()
-    bar.close()
-    return rows
+from homing.experiments import EXPERIMENTS, WORLDS, Method
+from homing.report import format_tables, summarise_explanations
+from toploc.evaluation.simulation import run_simulation, simulation_tracks
 
 
 @click.command()
@@ -124,10 +76,11 @@ def simulate(
     """
     experiments = list(EXPERIMENTS) if experiment.lower() == "all" else [experiment.upper()]
     worlds = (world,) if world else WORLDS
-    methods = ("thesis", "best") if method == "both" else (method,)
-    rows = run_simulation(experiments, worlds, methods, runs, seed, jobs, progress=True)
+    methods = cast(tuple[Method, ...], ("thesis", "best") if method == "both" else (method,))
+    run = run_simulation(experiments, worlds, methods, runs, seed, jobs, progress=True)
+    rows = run.rows
     click.echo(format_tables(rows))
-    summary = agreement(rows)
+    summary = run.agreement()
     if summary["compared"]:
         click.echo(
             f"\nthesis method vs paper: {summary['within']}/{summary['compared']} rows within"
@@ -147,17 +100,5 @@ def simulate(
     if plot_path:
         from homing.plots import plot_simulation  # matplotlib only when asked for
 
-        default = {
-            s.world: s
-            for s in settings(experiments[0], worlds)
-            if s.parameter == next(iter(s2.parameter for s2 in settings(experiments[0], worlds)))
-        }
-        tracks = {}
-        for w, setting in default.items():
-            base = next(s for s in settings(experiments[0], (w,)))
-            for m in methods:
-                result = run_setting(base, m, min(runs, 5), seed, keep_tracks=True)  # type: ignore[arg-type]
-                tracks[(w, m)] = (base.params, result.tracks or [])
-            del setting
-        plot_simulation(rows, tracks, plot_path)
+        plot_simulation(rows, simulation_tracks(run), plot_path)
         click.echo(f"wrote {plot_path}")

@@ -23,9 +23,7 @@ few features, so this happens for MSER pairs.
 from __future__ import annotations
 
 import math
-import multiprocessing
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +50,7 @@ from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
+from mapdb.workers import spawn_process_pool
 
 METHODS: tuple[str, ...] = ("thesis", "best", "alv-compass", "matched-alv", "matched-vote")
 BEST_METHOD = "matched-alv"
@@ -63,21 +62,10 @@ class EvaluationError(ValueError):
 
 
 @dataclass(frozen=True)
-class Place:
-    """A manifest row with a known position: ``position_m`` (2,) and heading in its room frame."""
-
-    image: str
-    path: Path
-    room: str
-    position_m: np.ndarray
-    heading_rad: float | None
-
-
-@dataclass(frozen=True)
 class HomingRun:
     """Every evaluated ordered pair (``here``, ``home`` index into ``places``) and the stats."""
 
-    places: tuple[Place, ...]
+    places: tuple[ManifestEntry, ...]
     here: np.ndarray
     home: np.ndarray
     home_direction_rad: np.ndarray  # in the current robot frame; NaN when undefined
@@ -94,24 +82,13 @@ class AlignmentRun:
     bins: dict[str, list[DistanceBin]]
 
 
-def load_places(dataset_dir: Path | str) -> tuple[Place, ...]:
+def load_places(dataset_dir: Path | str) -> tuple[ManifestEntry, ...]:
     """The manifest rows of ``dataset_dir`` with a position; ``EvaluationError`` if none has one.
 
     Manifest problems (missing folder or file, bad header or value) raise
     :class:`mapdb.errors.ManifestError` naming the file and line.
     """
-    entries: list[ManifestEntry] = read_manifest(dataset_dir)
-    places = tuple(
-        Place(
-            e.image,
-            e.path,
-            e.room,
-            np.array([e.x_m, e.y_m], dtype=float),
-            None if e.heading_deg is None else math.radians(e.heading_deg),
-        )
-        for e in entries
-        if e.x_m is not None and e.y_m is not None
-    )
+    places = tuple(e for e in read_manifest(dataset_dir) if e.x_m is not None and e.y_m is not None)
     if not places:
         manifest = Path(dataset_dir) / "manifest.csv"
         raise EvaluationError(f"{manifest}: no rows with a position (x_m, y_m) to evaluate")
@@ -140,8 +117,7 @@ def extract_fingerprints(
                 results.append(extract(read_panorama(path), params))
                 bar.update()
             return results
-        context = multiprocessing.get_context("spawn")  # never fork: OpenCV threads can hang
-        with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        with spawn_process_pool(workers) as pool:
             futures = [pool.submit(_extract_one, path, params) for path in paths]
             results = []
             for future in futures:
@@ -175,21 +151,36 @@ def _oriented(matches: dict[tuple[int, int], np.ndarray], a: int, b: int) -> np.
     return matches[(a, b)] if a < b else matches[(b, a)][:, ::-1]
 
 
-def _true_rotations(places: Sequence[Place], pairs: np.ndarray) -> np.ndarray:
-    headings = [p.heading_rad for p in places]
-    missing = sorted({places[i].image for i in pairs.ravel() if headings[i] is None})
+def positions_m(places: Sequence[ManifestEntry]) -> np.ndarray:
+    """``(n, 2)`` positions ``[x_m, y_m]`` of places, each in its room's frame (metres).
+
+    For places of :func:`load_places`, which all have a position.
+    """
+    return np.array([(p.x_m, p.y_m) for p in places], dtype=float).reshape(-1, 2)
+
+
+def headings_rad(places: Sequence[ManifestEntry]) -> np.ndarray:
+    """``(n,)`` headings of places in their room frames (radians, CCW); NaN where unknown."""
+    return np.array(
+        [np.nan if p.heading_deg is None else math.radians(p.heading_deg) for p in places],
+        dtype=float,
+    )
+
+
+def _true_rotations(places: Sequence[ManifestEntry], pairs: np.ndarray) -> np.ndarray:
+    h = headings_rad(places)
+    missing = sorted({places[i].image for i in pairs.ravel() if np.isnan(h[i])})
     if missing:
         raise EvaluationError(
             f"the true home direction in the robot frame needs headings; {len(missing)} "
             f"row(s) lack heading_deg, e.g. {missing[0]}"
         )
-    h = np.array(headings, dtype=float)
     return h[pairs[:, 1]] - h[pairs[:, 0]]
 
 
 def _home_directions(
     method: str,
-    places: Sequence[Place],
+    places: Sequence[ManifestEntry],
     fingerprints: Sequence[Fingerprint],
     pairs: np.ndarray,
     progress: bool,
@@ -228,7 +219,7 @@ def _home_directions(
 
 
 def evaluate_homing(
-    places: Sequence[Place],
+    places: Sequence[ManifestEntry],
     fingerprints: Sequence[Fingerprint],
     method: str = "thesis",
     progress: bool = False,
@@ -248,10 +239,9 @@ def evaluate_homing(
         raise EvaluationError("no room has two places with positions: nothing to home to")
     _true_rotations(places, pairs)  # the ground truth needs every heading, whatever the method
     directions = _home_directions(method, places, fingerprints, pairs, progress)
-    positions = np.array([p.position_m for p in places])
+    positions = positions_m(places)
     truth = true_home_direction_rad(positions[pairs[:, 0]], positions[pairs[:, 1]])
-    headings = np.array([p.heading_rad if p.heading_rad is not None else np.nan for p in places])
-    errors = pair_errors_deg(directions, headings[pairs[:, 0]], truth)
+    errors = pair_errors_deg(directions, headings_rad(places)[pairs[:, 0]], truth)
     stats = homing_statistics(
         errors, [places[i].image for i in pairs[:, 0]], [places[j].image for j in pairs[:, 1]]
     )
@@ -259,7 +249,7 @@ def evaluate_homing(
 
 
 def evaluate_alignment(
-    places: Sequence[Place],
+    places: Sequence[ManifestEntry],
     fingerprints: Sequence[Fingerprint],
     bin_width_m: float = 0.5,
     progress: bool = False,
@@ -286,7 +276,7 @@ def evaluate_alignment(
         estimates["matched"].append(
             matched_rotation_rad(bearings[i], bearings[j], _oriented(matches, i, j))
         )
-    positions = np.array([p.position_m for p in places])
+    positions = positions_m(places)
     distances = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
     errors = {
         name: angular_error_deg(np.rad2deg(np.array(values)), np.rad2deg(truth))

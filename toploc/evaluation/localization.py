@@ -1,15 +1,26 @@
-"""Scoring single-shot localization: top-1 room accuracy, confusion, ambiguity and timing.
+"""Single-shot localization measured: the query loops and their scoring (top-1 room accuracy,
+confusion, ambiguity and timing).
 
-Pure: a list of :class:`QueryOutcome` in, a :class:`LocalizationScore` out.
+The loops ask a :class:`~localizer.localizer.Localizer` once per query, from a uniform prior:
+every panorama of a dataset (:func:`localize_dataset`, typically under another condition than
+the map), or every place of the map against the map without it (:func:`localize_leave_one_out`).
+Each returns a :class:`LocalizationRun`. The scoring is pure: a list of :class:`QueryOutcome`
+in, a :class:`LocalizationScore` out (:func:`score_localization`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
+
+from localizer.localizer import Localizer
+from localizer.panorama_io import read_panorama
+from mapdb.dataset import read_manifest
 
 
 @dataclass(frozen=True)
@@ -89,6 +100,58 @@ def score_localization(outcomes: Sequence[QueryOutcome]) -> LocalizationScore:
             s: float(np.median([o.timing_ms.get(s, 0.0) for o in outcomes])) for s in stages
         },
     )
+
+
+@dataclass(frozen=True)
+class LocalizationRun:
+    """Every query's outcome, in order, and their score."""
+
+    outcomes: tuple[QueryOutcome, ...]
+    score: LocalizationScore
+
+
+def localize_dataset(
+    localizer: Localizer, dataset_dir: Path | str, progress: bool = False
+) -> LocalizationRun:
+    """Localize every panorama of ``dataset_dir`` (a folder with ``manifest.csv``) once.
+
+    The true room of a query is its manifest row's. A bad manifest raises
+    :class:`mapdb.errors.ManifestError`, an unreadable image
+    :class:`localizer.panorama_io.PanoramaError`, both naming the file.
+    """
+    outcomes = []
+    entries = read_manifest(dataset_dir)
+    for entry in tqdm(entries, desc="localize", unit="pano", disable=not progress):
+        belief, observation = localizer.localize_once(read_panorama(entry.path))
+        outcomes.append(
+            QueryOutcome(
+                entry.image, entry.room, belief.top[0], str(belief.state), observation.timing_ms
+            )
+        )
+    return LocalizationRun(tuple(outcomes), score_localization(outcomes))
+
+
+def localize_leave_one_out(localizer: Localizer, progress: bool = False) -> LocalizationRun:
+    """Localize each place of the map with its stored fingerprint, the place itself left out.
+
+    The query is named ``"place <id>"``; its true room is the place's room.
+    """
+    outcomes = []
+    for place in tqdm(localizer.map.places, desc="leave-one-out", disable=not progress):
+        localizer.reset()
+        fingerprint = localizer.map.fingerprint(place.id)
+        observation = localizer.observe_fingerprint(fingerprint, exclude=place.id)
+        belief = localizer.update(observation)
+        outcomes.append(
+            QueryOutcome(
+                f"place {place.id}",
+                place.room,
+                belief.top[0],
+                str(belief.state),
+                observation.timing_ms,
+            )
+        )
+    return LocalizationRun(tuple(outcomes), score_localization(outcomes))
 
 
 def _share(flags: Any) -> float:
