@@ -19,7 +19,7 @@ lock, read-only) and a dead worker process stop the build with a
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import closing
@@ -136,7 +136,7 @@ def plan_jobs(
 
 def _extract_serial(
     jobs: Sequence[_Job], extract: Extractor
-) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
+) -> Generator[tuple[_Job, list[Fingerprint] | Exception], None, None]:
     for job in jobs:
         try:
             yield job, extract(job.entry.path)
@@ -146,7 +146,7 @@ def _extract_serial(
 
 def _extract_parallel(
     jobs: Sequence[_Job], extract: Extractor, workers: int
-) -> Iterator[tuple[_Job, list[Fingerprint] | Exception]]:
+) -> Generator[tuple[_Job, list[Fingerprint] | Exception], None, None]:
     """Results as they complete, with at most ``2 * workers`` jobs submitted at a time."""
     pending = iter(jobs)
     pool = spawn_process_pool(workers)

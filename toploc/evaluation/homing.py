@@ -243,7 +243,9 @@ def evaluate_homing(
     truth = true_home_direction_rad(positions[pairs[:, 0]], positions[pairs[:, 1]])
     errors = pair_errors_deg(directions, headings_rad(places)[pairs[:, 0]], truth)
     stats = homing_statistics(
-        errors, [places[i].image for i in pairs[:, 0]], [places[j].image for j in pairs[:, 1]]
+        errors,
+        np.array([places[i].image for i in pairs[:, 0]]),
+        np.array([places[j].image for j in pairs[:, 1]]),
     )
     return HomingRun(tuple(places), pairs[:, 0], pairs[:, 1], directions, errors, stats)
 
