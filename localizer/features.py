@@ -1,7 +1,10 @@
-"""Keypoints and descriptors on a cylindrical panorama: SIFT (DoG) and MSER, each with a bearing.
+"""Keypoints and descriptors on a 360° panorama: SIFT (DoG) and MSER, each with a bearing.
 
 ``extract(image, params)`` takes a grey ``uint8`` panorama (column 0 along the heading, columns
 clockwise; see :mod:`homing.bearings`) and returns a :class:`~mapdb.records.Fingerprint`.
+``params.camera`` names its camera model (:mod:`localizer.cameras`: ``cylinder`` or
+``equirect``); :func:`extract_panorama` chooses it from a :class:`~localizer.cameras.CameraSpec`
+(``auto``: a 2:1 image is equirectangular) with per-camera defaults (:data:`CAMERA_DEFAULTS`).
 
 - ``"sift"``: Lowe's DoG keypoints with SIFT descriptors (``cv2.SIFT_create``).
 - ``"mser"``: maximally stable extremal regions (``cv2.MSER_create``); each region becomes a
@@ -18,8 +21,13 @@ MSER regions cut by the end of the padding are dropped (their centroid would be 
 larger than the margin that straddle the seam may still differ from those of a rolled panorama,
 because MSER stability and SIFT's coarse octaves see the truncated neighbourhood.
 
+Resolution: an image wider than ``max_width_px`` is first shrunk to that width (``INTER_AREA``);
+keypoints, image size and camera are those of the shrunk image.
+
 Filters (thesis §5.8-5.9): a horizon band of ± ``band_deg`` degrees, and the ``"lower"`` or
-``"upper"`` half of the rows. Filters act on keypoint positions after detection, so detection near
+``"upper"`` half of the rows; and an elevation band ``[min_elevation_deg, max_elevation_deg]``
+that leaves out the nadir (tripod, robot body) and the zenith (ceiling lamps) of a sphere.
+Filters act on keypoint positions after detection, so detection near
 the band edge sees the whole image. ``max_keypoints`` then keeps the strongest (SIFT response;
 MSER: largest size).
 
@@ -30,14 +38,25 @@ Parameters come as a frozen :class:`ExtractionParams`; named presets are merged 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 import cv2
 import numpy as np
 
 from homing.bearings import bearing_rad_from_column, wrap_angle_deg
-from localizer.panorama import ROWS_SELECTIONS, Cylinder, horizon_band_mask, rows_mask
+from localizer.cameras import (
+    ROWS_SELECTIONS,
+    CameraSpec,
+    Cylinder,
+    Equirect,
+    PanoramaCamera,
+    elevation_mask,
+    horizon_band_mask,
+    panorama_kind,
+    rows_mask,
+)
+from localizer.panorama_io import unwrap_omni
 from mapdb.records import Fingerprint
 
 DETECTORS: tuple[str, ...] = ("sift", "mser")
@@ -48,16 +67,25 @@ SIFT_DESCRIPTOR_SIZE = 128
 class ExtractionParams:
     """How features are extracted from a panorama (recorded in each Fingerprint's ``params``).
 
+    ``camera``: the panorama's model, ``"cylinder"`` or ``"equirect"`` (:mod:`localizer.cameras`).
     ``band_deg``: keep keypoints within ± this many degrees of the horizon (None: all rows).
+    ``min_elevation_deg`` / ``max_elevation_deg``: keep keypoints seen between these elevations
+    (None: no limit on that side).
     ``rows``: ``"all"``, ``"lower"`` or ``"upper"`` half (relative to the horizon row).
-    ``focal_px`` / ``horizon_row_px``: the cylinder geometry for the band (see ``Cylinder``).
+    ``focal_px`` / ``horizon_row_px``: the cylinder geometry (see ``Cylinder``), in pixels of
+    the image as given (scaled with it when it is shrunk).
+    ``max_width_px``: shrink wider images to this width before detection (None: never).
     ``max_keypoints``: keep at most this many after filtering (None: no limit).
     ``wrap_margin_px``: columns of circular padding on each side for the 360° wrap-around.
     ``sift_*`` / ``mser_*``: the OpenCV detector parameters.
     """
 
     detector: str = "sift"
+    camera: str = "cylinder"
     band_deg: float | None = None
+    min_elevation_deg: float | None = None
+    max_elevation_deg: float | None = None
+    max_width_px: int | None = None
     rows: str = "all"
     max_keypoints: int | None = None
     focal_px: float | None = None
@@ -78,6 +106,13 @@ class ExtractionParams:
             raise ValueError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
         if self.rows not in ROWS_SELECTIONS:
             raise ValueError(f"rows must be one of {ROWS_SELECTIONS}, got {self.rows!r}")
+        if self.camera not in ("cylinder", "equirect"):
+            raise ValueError(f"camera must be cylinder or equirect, got {self.camera!r}")
+        if self.max_width_px is not None and self.max_width_px < 8:
+            raise ValueError(f"max_width_px must be None or >= 8, got {self.max_width_px!r}")
+        low, high = self.min_elevation_deg, self.max_elevation_deg
+        if low is not None and high is not None and not low < high:
+            raise ValueError(f"min_elevation_deg {low} must be below max_elevation_deg {high}")
         if self.band_deg is not None and not 0.0 <= self.band_deg < 90.0:
             raise ValueError(f"band_deg must be None or in [0, 90), got {self.band_deg!r}")
         if self.max_keypoints is not None and self.max_keypoints < 0:
@@ -113,6 +148,15 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 """Named configurations, merged over ``DEFAULT_PARAMS`` (thesis §5.8: ±20° was best on Vardy's
 mirror images; §5.9: the lower half helped in the robot laboratory)."""
+
+CAMERA_DEFAULTS: dict[str, dict[str, Any]] = {
+    "cylinder": {},
+    "equirect": {"max_width_px": 1024, "min_elevation_deg": -50.0, "max_elevation_deg": 60.0},
+}
+"""Per camera model, merged under a preset. A 360° camera's 2048 x 1024 sphere is read at
+1024 x 512 (SIFT takes about 0.4 s there, 0.8 s at full size, on one core here), without the
+nadir below -50° (tripod or robot body, and the floor right under the camera) or the zenith
+above 60° (ceiling lamps)."""
 
 
 def params_from_preset(name: str, **overrides: Any) -> ExtractionParams:
@@ -226,14 +270,39 @@ def _seam_duplicates(
     return drop
 
 
+def _shrunk(image: np.ndarray, params: ExtractionParams) -> tuple[np.ndarray, ExtractionParams]:
+    """The image at most ``max_width_px`` wide, and the params with the cylinder geometry
+    scaled to it."""
+    h, w = image.shape
+    if params.max_width_px is None or w <= params.max_width_px:
+        return image, params
+    scale = params.max_width_px / w
+    size = (params.max_width_px, max(round(h * scale), 1))
+    shrunk = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    focal, horizon = params.focal_px, params.horizon_row_px
+    return shrunk, replace(
+        params,
+        focal_px=None if focal is None else focal * scale,
+        horizon_row_px=None if horizon is None else (horizon + 0.5) * scale - 0.5,
+    )
+
+
+def camera_for(params: ExtractionParams, width_px: int, height_px: int) -> PanoramaCamera:
+    """The camera model ``params`` name, for a panorama of this size."""
+    if params.camera == "equirect":
+        return Equirect(width_px, height_px)
+    return Cylinder(width_px, height_px, params.focal_px, params.horizon_row_px)
+
+
 def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fingerprint:
     """Detect and describe features on grey uint8 panorama ``image`` (H x W) with ``params``.
 
     Returns a Fingerprint whose keypoints lie in ``-0.5 <= x < W - 0.5`` with robot-frame bearings
-    ``-2*pi*x/W`` wrapped to (-pi, pi]. Nothing detected (a blank wall, or an image under 3 rows)
-    gives an empty Fingerprint: 0 rows, descriptors of shape (0, 128) float32.
+    ``-2*pi*x/W`` wrapped to (-pi, pi] (``W`` after shrinking to ``max_width_px``). Nothing
+    detected (a blank wall, or an image under 3 rows) gives an empty Fingerprint: 0 rows,
+    descriptors of shape (0, 128) float32.
     """
-    image = _check_image(image)
+    image, params = _shrunk(_check_image(image), params)
     h, w = image.shape
     record = params.to_dict()
     if h < 3:
@@ -255,9 +324,10 @@ def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fin
     descriptors = descriptors[keep]
     keep = ~_seam_duplicates(xy, size, angle_deg, w)
 
-    cylinder = Cylinder(w, h, params.focal_px, params.horizon_row_px)
-    keep &= horizon_band_mask(xy[:, 1], cylinder, params.band_deg)
-    keep &= rows_mask(xy[:, 1], cylinder, params.rows)  # type: ignore[arg-type]
+    camera = camera_for(params, w, h)
+    keep &= horizon_band_mask(xy[:, 1], camera, params.band_deg)
+    keep &= elevation_mask(xy[:, 1], camera, params.min_elevation_deg, params.max_elevation_deg)
+    keep &= rows_mask(xy[:, 1], camera, params.rows)  # type: ignore[arg-type]
     index = np.flatnonzero(keep)
     if params.max_keypoints is not None and len(index) > params.max_keypoints:
         strength = response if params.detector == "sift" else size
@@ -278,3 +348,17 @@ def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fin
 def extract_preset(image: np.ndarray, preset: str = "sift", **overrides: Any) -> Fingerprint:
     """``extract`` with the named preset merged over the defaults (and ``overrides`` over that)."""
     return extract(image, params_from_preset(preset, **overrides))
+
+
+def extract_with_camera(
+    image: np.ndarray, camera: CameraSpec, preset: str = "sift", **overrides: Any
+) -> Fingerprint:
+    """``extract`` on a 360° camera image: a mirror image (``camera`` omni) is unwrapped into a
+    cylinder first; the camera model is chosen by ``camera`` from the panorama's size, with that
+    model's :data:`CAMERA_DEFAULTS` under the preset and ``overrides`` over everything."""
+    image = _check_image(image)
+    if camera.mirror is not None:
+        image = unwrap_omni(image, camera.mirror)
+    kind = panorama_kind(camera, image.shape[1], image.shape[0])
+    merged = {**CAMERA_DEFAULTS[kind], "camera": kind, **overrides}
+    return extract(image, params_from_preset(preset, **merged))

@@ -26,8 +26,9 @@ from localizer.belief import (
     StateThresholds,
     room_likelihood,
 )
+from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
-from localizer.features import extract_preset
+from localizer.features import extract_with_camera
 from localizer.policy import PlaceSimilarity
 from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
@@ -43,8 +44,10 @@ class LocalizerConfig:
 
     ``detector``: the extraction preset the map was built with (``sift``, ``mser``, ...).
     ``use_index``: shortlist places with the retrieval index before verification (``None``:
-    when the map has at least ``INDEX_MIN_PLACES`` places). ``stay_probability``: per move,
-    the chance of staying in the same room (the prediction along the room graph).
+    when the map has at least ``INDEX_MIN_PLACES`` places). ``camera``: the model of the
+    panoramas to localize (:mod:`localizer.cameras`; ``auto`` by their size).
+    ``stay_probability``: per move, the chance of staying in the same room (the prediction
+    along the room graph).
     """
 
     detector: str = "sift"
@@ -53,6 +56,7 @@ class LocalizerConfig:
     thresholds: StateThresholds = field(default_factory=StateThresholds)
     stay_probability: float = 0.8
     use_index: bool | None = None
+    camera: CameraSpec = field(default_factory=CameraSpec)
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,8 +151,9 @@ class Localizer:
         self._similarity: dict[tuple[int, int], int] = {}
 
     def extract(self, image: np.ndarray) -> Fingerprint:
-        """The fingerprint of a panorama (grey or BGR uint8) with the map's detector."""
-        return extract_preset(to_grey(image), self.config.detector)
+        """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read
+        through the configured camera model."""
+        return extract_with_camera(to_grey(image), self.config.camera, self.config.detector)
 
     def observe(self, image: np.ndarray) -> Observation:
         """Extract and gather evidence against the map; the belief is not changed."""

@@ -18,11 +18,12 @@ mirror's rim sees downwards, pass ``outer_at_top=False``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+from localizer.cameras import MirrorUnwrap
 
 MIN_SIDE_PX = 2
 """Smallest accepted image side in pixels (a one-pixel-wide image is not a panorama)."""
@@ -99,36 +100,10 @@ def read_grey_image(path: str | Path) -> np.ndarray:
 
 
 def read_panorama(path: str | Path) -> np.ndarray:
-    """Read a cylindrical 360° panorama (column 0 along the heading, clockwise) as grey uint8."""
+    """Read a 360° camera image as grey uint8: a cylinder or an equirectangular sphere (column 0
+    along the heading, clockwise), or a mirror image that the extraction unwraps
+    (:func:`localizer.features.extract_with_camera`)."""
     return read_grey_image(path)
-
-
-@dataclass(frozen=True)
-class MirrorUnwrap:
-    """How to unwrap an omnidirectional mirror image into a cylindrical panorama.
-
-    ``centre_x_px``, ``centre_y_px``: the mirror's centre in OpenCV pixel coordinates of the
-    mirror image. The annulus ``inner_radius_px <= r < outer_radius_px`` becomes the panorama,
-    one row per pixel of radius. ``width_px`` is the panorama width (None: the outer
-    circumference, ``round(2*pi*outer_radius_px)``). See the module docstring for
-    ``heading_image_deg``, ``flip`` and ``outer_at_top``.
-    """
-
-    centre_x_px: float
-    centre_y_px: float
-    inner_radius_px: float
-    outer_radius_px: float
-    width_px: int | None = None
-    heading_image_deg: float = 90.0
-    flip: bool = False
-    outer_at_top: bool = True
-
-    @property
-    def panorama_width_px(self) -> int:
-        """Width of the unwrapped panorama in pixels (the default resolved)."""
-        if self.width_px is not None:
-            return int(self.width_px)
-        return round(2.0 * math.pi * self.outer_radius_px)
 
 
 def _check_unwrap(image_shape: tuple[int, ...], unwrap: MirrorUnwrap, source: str) -> None:

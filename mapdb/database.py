@@ -35,7 +35,7 @@ from mapdb.schema import MIGRATIONS, SCHEMA_VERSION, Migration, migrate, read_sc
 
 _SELECT_PLACES = (
     "SELECT p.id, r.name, p.x_m, p.y_m, p.heading_deg, p.image_sha256, p.image_width_px, "
-    "p.image_height_px, p.captured_utc, p.source, p.added_utc "
+    "p.image_height_px, p.captured_utc, p.source, p.added_utc, p.camera "
     "FROM places p JOIN rooms r ON r.id = p.room_id"
 )
 
@@ -276,6 +276,10 @@ class MapDatabase:
         if len(sizes) != 1:
             raise ValueError(f"fingerprints of {place.source!r} disagree on image size: {sizes}")
         ((width_px, height_px),) = sizes
+        cameras = {str(f.params.get("camera", "cylinder")) for f in fingerprints}
+        if len(cameras) != 1:
+            raise ValueError(f"fingerprints of {place.source!r} disagree on the camera: {cameras}")
+        (camera,) = cameras
         rows = [fingerprint_to_row(f) for f in fingerprints]
         with self.transaction():
             existing = self._place_id_for_image(place.image_sha256)
@@ -292,6 +296,7 @@ class MapDatabase:
                 "captured_utc": place.captured_utc,
                 "source": place.source,
                 "added_utc": utc_now_iso(),
+                "camera": camera,
             }
             place_id = _inserted_id(self.db.table("places").insert(place_row))
             self.db.table("fingerprints").insert_all(

@@ -54,6 +54,7 @@ class Place:
     captured_utc: str | None = None
     source: str = ""
     added_utc: str = ""
+    camera: str = "cylinder"
 
     @property
     def xy_m(self) -> tuple[float, float] | None:

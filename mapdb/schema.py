@@ -13,7 +13,9 @@ Tables (all STRICT; positions in metres and headings in degrees in the frame of 
 - ``edges(room_a_id, room_b_id, created_utc)``: undirected, stored once with
   ``room_a_id < room_b_id``; both reference ``rooms``.
 - ``places(id, room_id -> rooms, x_m, y_m, heading_deg (NULL = unknown), image_sha256 UNIQUE,
-  image_width_px, image_height_px, captured_utc, source, added_utc)``
+  image_width_px, image_height_px, captured_utc, source, added_utc, camera)``; ``camera`` is the
+  panorama's model, ``cylinder`` or ``equirect`` (version 2; older places are cylinders), and the
+  image size is that of the panorama the features were extracted on.
 - ``fingerprints(id, place_id -> places, detector, n_keypoints, descriptor_dim, keypoints_xy,
   bearings_rad, descriptor_dtype, descriptors (blobs, see :mod:`mapdb.codec`), alv_x, alv_y,
   params_json)``, UNIQUE ``(place_id, detector)``, indexed by ``(detector, place_id)`` so one
@@ -117,7 +119,12 @@ def _v1_initial(db: sqlite_utils.Database) -> None:
     db.table("fingerprints").create_index(["detector", "place_id"])
 
 
-MIGRATIONS: tuple[Migration, ...] = (_v1_initial,)
+def _v2_camera(db: sqlite_utils.Database) -> None:
+    """Version 2: each place records its camera model (maps made before were all cylinders)."""
+    db.execute("ALTER TABLE places ADD COLUMN camera TEXT NOT NULL DEFAULT 'cylinder'")
+
+
+MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -14,21 +14,28 @@ from mapdb.build import Extractor
 from mapdb.records import Fingerprint
 
 
-def extract_panorama(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
-    """Read the cylindrical panorama at ``path`` and extract one fingerprint per preset.
+def extract_panorama(
+    path: Path, presets: tuple[str, ...], camera: str = "auto"
+) -> list[Fingerprint]:
+    """Read the panorama at ``path`` and extract one fingerprint per preset; ``camera`` is a
+    ``--camera`` text (:func:`localizer.cameras.parse_camera`: ``auto`` reads a 2:1 image as
+    equirectangular, an ``omni:...`` mirror image is unwrapped first).
 
     Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file.
     """
     import cv2
 
-    from localizer.features import extract_preset
+    from localizer.cameras import parse_camera
+    from localizer.features import extract_with_camera
     from localizer.panorama_io import read_panorama
 
     cv2.setNumThreads(1)  # one process per core already
+    spec = parse_camera(camera)
     image = read_panorama(path)
-    return [extract_preset(image, preset) for preset in presets]
+    return [extract_with_camera(image, spec, preset) for preset in presets]
 
 
-def resolve_extractor(presets: tuple[str, ...]) -> Extractor:
-    """The picklable ``extract(path)``: :func:`extract_panorama` bound to ``presets``."""
-    return functools.partial(extract_panorama, presets=presets)
+def resolve_extractor(presets: tuple[str, ...], camera: str = "auto") -> Extractor:
+    """The picklable ``extract(path)``: :func:`extract_panorama` bound to ``presets`` and the
+    ``camera`` text."""
+    return functools.partial(extract_panorama, presets=presets, camera=camera)

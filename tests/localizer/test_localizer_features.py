@@ -4,16 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from localizer_images import make_textured_panorama
 
 from homing.bearings import wrap_angle_rad
+from localizer.cameras import CameraSpec, Cylinder, Equirect, elevation_rad_from_row, parse_camera
 from localizer.features import (
     ExtractionParams,
     extract,
     extract_preset,
+    extract_with_camera,
     pad_circular,
     params_from_preset,
 )
-from localizer.panorama import Cylinder, elevation_rad_from_row
 from mapdb.records import Fingerprint
 
 DETECTORS = ["sift", "mser"]
@@ -185,3 +187,25 @@ def test_fingerprint_select(textured: np.ndarray) -> None:
     np.testing.assert_array_equal(sub.descriptors, fp.descriptors[mask])
     with pytest.raises(ValueError, match="mask"):
         fp.select(np.ones(fp.n + 1, dtype=bool))
+
+
+def test_a_two_to_one_image_is_read_as_a_sphere_shrunk_and_banded() -> None:
+    sphere = make_textured_panorama(1200, 600)
+    fp = extract_with_camera(sphere, CameraSpec(), "sift")
+    assert (fp.image_width_px, fp.image_height_px, fp.params["camera"]) == (1024, 512, "equirect")
+    assert fp.n > 50
+    elevation_deg = np.rad2deg(Equirect(1024, 512).elevation_rad(fp.keypoints_xy[:, 1]))
+    assert elevation_deg.min() >= -50.0 and elevation_deg.max() <= 60.0
+    everything = extract_with_camera(sphere, CameraSpec(), "sift", min_elevation_deg=None)
+    assert everything.n > fp.n  # the default band did leave keypoints out
+
+
+def test_a_mirror_image_is_unwrapped_before_extraction() -> None:
+    yy, xx = np.mgrid[:201, :201]
+    angle = np.arctan2(yy - 100.0, xx - 100.0)
+    mirror = np.clip(
+        128 + 100 * np.sin(7 * angle) * np.cos(np.hypot(yy - 100, xx - 100) / 4), 0, 255
+    )
+    fp = extract_with_camera(mirror.astype(np.uint8), parse_camera("omni:100,100,20,90"), "sift")
+    assert fp.params["camera"] == "cylinder"
+    assert fp.image_height_px == 71  # one row per pixel of radius, 20..90

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
+from localizer.cameras import MirrorUnwrap
 from localizer.panorama_io import (
-    MirrorUnwrap,
     PanoramaError,
     read_grey_image,
     read_omni_panorama,

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import hashlib
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import sqlite_utils
-from mapdb_helpers import table_counts
+from mapdb_helpers import make_fingerprint, new_place, table_counts
 
 from mapdb.database import MapDatabase
 from mapdb.errors import (
@@ -135,3 +137,25 @@ def test_readonly_open_of_older_schema_asks_for_migration(db_path: Path) -> None
 def test_read_schema_version_of_empty_database_is_zero(tmp_path: Path) -> None:
     db = sqlite_utils.Database(tmp_path / "blank.db")
     assert read_schema_version(db) == 0
+
+
+def test_a_version_1_map_opens_and_its_places_are_cylinders(
+    db_path: Path, rng: np.random.Generator
+) -> None:
+    with MapDatabase.open(db_path, migrations=MIGRATIONS[:1]) as old:
+        old.db.execute(
+            "INSERT INTO rooms (name, created_utc) VALUES ('hall', '2026-01-01T00:00:00Z')"
+        )
+        old.db.execute(
+            "INSERT INTO places (room_id, image_sha256, image_width_px, image_height_px, source, "
+            "added_utc) VALUES (1, ?, 1024, 192, 'old.png', '2026-01-01T00:00:00Z')",
+            ["a" * 64],
+        )
+        old.db.conn.commit()
+    with MapDatabase.open(db_path) as map_db:
+        assert map_db.schema_version() == SCHEMA_VERSION
+        (place,) = map_db.places()
+        assert (place.source, place.camera) == ("old.png", "cylinder")
+        fingerprint = replace(make_fingerprint(rng, "sift", 5), params={"camera": "equirect"})
+        new_id = map_db.add_place(new_place("hall", 7), [fingerprint])
+        assert map_db.place(new_id).camera == "equirect"

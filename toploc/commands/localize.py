@@ -14,9 +14,11 @@ from pathlib import Path
 import click
 
 from localizer.belief import RoomBelief
+from localizer.cameras import parse_camera
 from localizer.localizer import Localizer, LocalizerConfig, Observation
 from localizer.panorama_io import PanoramaError, read_panorama
 from mapdb.errors import MapDatabaseError
+from toploc.commands.options import camera_option
 from toploc.maps import load_map
 
 
@@ -29,12 +31,15 @@ def localizer_errors() -> Iterator[None]:
         raise click.ClickException(str(error)) from error
 
 
-def load_localizer(db_path: Path, detector: str, index: bool | None) -> Localizer:
-    """The localizer on the map at ``db_path`` with the ``detector`` fingerprints."""
+def load_localizer(
+    db_path: Path, detector: str, index: bool | None, camera: str = "auto"
+) -> Localizer:
+    """The localizer on the map at ``db_path`` with the ``detector`` fingerprints, reading
+    queries through the ``camera`` model (a ``--camera`` text)."""
     if not db_path.is_file():
         raise click.ClickException(f"map database {db_path} does not exist")
     loaded = load_map(db_path, detector, use_index=index)
-    return Localizer(loaded, LocalizerConfig(detector=detector))
+    return Localizer(loaded, LocalizerConfig(detector=detector, camera=parse_camera(camera)))
 
 
 def describe(belief: RoomBelief, observation: Observation, top: int = 5) -> str:
@@ -73,12 +78,15 @@ index_option = click.option(
 @db_option
 @detector_option
 @index_option
+@camera_option
 @click.option("--json", "as_json", is_flag=True, help="Print the belief as JSON.")
-def localize(image: Path, db_path: Path, detector: str, index: bool | None, as_json: bool) -> None:
+def localize(
+    image: Path, db_path: Path, detector: str, index: bool | None, camera: str, as_json: bool
+) -> None:
     """Which room is the panorama IMAGE from? The one-shot belief over the map's rooms."""
     with localizer_errors():
         panorama = read_panorama(image)
-        localizer = load_localizer(db_path, detector, index)
+        localizer = load_localizer(db_path, detector, index, camera)
         belief, observation = localizer.localize_once(panorama)
     if as_json:
         report = belief.to_json() | {"timing_ms": dict(observation.timing_ms)}

@@ -27,6 +27,7 @@ from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import MapInfo
+from toploc.commands.options import camera_option
 from toploc.extraction import resolve_extractor
 
 DEFAULT_DETECTORS = "sift,mser"
@@ -111,10 +112,17 @@ def map_group() -> None:
     show_default=True,
     help="Extraction processes (0 or 1: in this process).",
 )
+@camera_option
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 @click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
 def build_command(
-    dataset: Path, db_path: Path, detectors: str, workers: int, progress: bool, verbose: bool
+    dataset: Path,
+    db_path: Path,
+    detectors: str,
+    workers: int,
+    camera: str,
+    progress: bool,
+    verbose: bool,
 ) -> None:
     """Import the panoramas of DATASET (a folder with manifest.csv) into the map.
 
@@ -129,7 +137,7 @@ def build_command(
             report = build_map(
                 map_db,
                 entries,
-                resolve_extractor(presets),
+                resolve_extractor(presets, camera),
                 workers=workers,
                 progress=progress,
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
@@ -149,6 +157,7 @@ def build_command(
 @click.option("--y-m", type=float, default=None, help="y in the room's frame, metres.")
 @click.option("--heading-deg", type=float, default=None, help="Heading in the room, degrees CCW.")
 @detector_option
+@camera_option
 def add_command(
     image: Path,
     db_path: Path,
@@ -157,6 +166,7 @@ def add_command(
     y_m: float | None,
     heading_deg: float | None,
     detectors: str,
+    camera: str,
 ) -> None:
     """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
     if (x_m is None) != (y_m is None):
@@ -166,7 +176,8 @@ def add_command(
     presets = parse_detectors(detectors)
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
-        report = build_map(map_db, [entry], resolve_extractor(presets), workers=0, progress=False)
+        extractor = resolve_extractor(presets, camera)
+        report = build_map(map_db, [entry], extractor, workers=0, progress=False)
     (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
     if outcome.status is Status.FAILED:
         raise click.ClickException(f"{image}: {outcome.message}")

@@ -10,9 +10,12 @@ from pathlib import Path
 
 import click
 
+from localizer.cameras import parse_camera
+from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
+from toploc.commands.options import camera_option
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.service import start_service
 
@@ -42,6 +45,7 @@ from toploc.service import start_service
 @click.option(
     "--no-sim", is_flag=True, help="No simulated robot: drive the robot node already on the bus."
 )
+@camera_option
 def serve(
     db_path: Path | None,
     robot_id: str,
@@ -53,6 +57,7 @@ def serve(
     sim_room: str,
     seed: int,
     no_sim: bool,
+    camera: str,
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
     db = db_path or ensure_world_map(sim_world)
@@ -64,7 +69,8 @@ def serve(
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        with start_service(db, config, robot, policy):
+        localizer_config = LocalizerConfig(camera=parse_camera(camera))
+        with start_service(db, config, robot, policy, localizer_config):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
             click.echo(
                 f"serving {db} as toploc/{robot_id}/** ({mode}, listen {list(listen)}, "
