@@ -10,7 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from localizer.belief import LocalizationState, PlaceScore, RoomBelief
+from localizer.belief import LocalizationState, RoomBelief
+from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer
 from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Robot

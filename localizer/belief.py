@@ -1,5 +1,5 @@
-"""The belief over rooms: evidence to a likelihood, a discrete Bayes filter on the room graph,
-and the localized / ambiguous / lost test.
+"""The belief over rooms: a discrete Bayes filter on the room graph, and the localized /
+ambiguous / lost test (the likelihood of one frame's evidence is :mod:`localizer.likelihood`).
 
 Pure core: numpy and dataclasses in, numpy and dataclasses out; no I/O.
 
@@ -14,132 +14,16 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from filterpy.discrete_bayes import normalize as fp_normalize
 from filterpy.discrete_bayes import update as fp_update
-from scipy.special import softmax
 from scipy.stats import entropy as scipy_entropy
 
+from localizer.likelihood import PlaceScore, max_inliers
+
 BELIEF_SCHEMA = 1
-
-
-class PlaceScore(Protocol):
-    """Evidence for one stored place: its id, its room and the verified inlier count."""
-
-    @property
-    def place_id(self) -> int: ...
-
-    @property
-    def room(self) -> str: ...
-
-    @property
-    def inliers(self) -> int: ...
-
-
-# --------------------------------------------------------------------------------------------
-# Likelihood
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LikelihoodModel:
-    """How the inlier counts of one frame become a likelihood per room.
-
-    For each room, take ``n_r``, the inlier count of its best place (0 if none of its places has
-    evidence). Then
-
-        if max_r n_r < min_inliers:   L_r = 1/N                          ("nothing matched")
-        else:                         L_r = (1 - floor) * softmax(n / temperature_inliers)_r
-                                            + floor / N
-
-    with N the number of rooms. The result is normalised (sums to 1) and every room keeps at
-    least ``floor / N``, so one bad frame (motion blur, a person in front of the camera) cannot
-    zero a room: a single frame changes the odds of two rooms by at most
-    ``(1 - floor + floor/N) / (floor/N)`` (39x for two rooms, 96x for five with the defaults).
-
-    Defaults and why:
-
-    - ``temperature_inliers = 15``: an inlier difference of ``d`` between two rooms gives, before
-      the floor, a likelihood ratio of ``exp(d / 15)``. A **10-inlier difference** (what the view
-      through the door adds in the look-alike offices) is therefore worth a factor
-      ``exp(2/3) ≈ 1.95`` (1.88 after the floor, two rooms): one frame tilts the belief, several
-      consistent frames settle it; a 30-inlier difference is worth ``e^2 ≈ 7.4`` (6.2 after the
-      floor). The model depends only on differences, so the ~0-20 inliers that unrelated places
-      get by chance cancel out; the softmax saturates, so 400 versus 20 inliers is not more
-      decisive than the floor allows. Frames are treated as independent, but repeated captures
-      at one spot share their error; a lower temperature then localizes on noise. On the
-      synthetic look-alike offices of ``tests/localizer/test_localizer_policy.py`` (inlier noise
-      sigma 8, 400 episodes) the thesis policy ended in the wrong office in 7.8 % of episodes
-      at T = 10, 1.7 % at T = 15 and 0.7 % at T = 20 (mean moves 3.1, 4.3, 4.8); recalibrate
-      on real evidence.
-    - ``floor = 0.05``: 5 % of the likelihood mass is uniform; see the bound above.
-    - ``min_inliers = 20``: below this no place really matched (unrelated places reach ~20 by
-      chance), so the frame carries no information and the likelihood is flat; the same number
-      is :attr:`StateThresholds.lost_min_inliers`.
-    """
-
-    temperature_inliers: float = 15.0
-    floor: float = 0.05
-    min_inliers: int = 20
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.temperature_inliers) and self.temperature_inliers > 0):
-            raise ValueError(
-                f"temperature_inliers must be positive and finite, got {self.temperature_inliers}"
-            )
-        if not 0.0 < self.floor <= 1.0:
-            raise ValueError(f"floor must be in (0, 1], got {self.floor}")
-        if self.min_inliers < 0:
-            raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
-
-    def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
-        """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
-        counts = np.asarray(room_inliers, dtype=float)
-        if counts.ndim != 1 or counts.size == 0:
-            raise ValueError(
-                f"room_inliers must be a non-empty 1-D array, got shape {counts.shape}"
-            )
-        if not np.all(np.isfinite(counts)) or np.any(counts < 0):
-            raise ValueError(f"room_inliers must be finite and >= 0, got {counts.tolist()}")
-        n_rooms = counts.size
-        if counts.max() < self.min_inliers:
-            return np.full(n_rooms, 1.0 / n_rooms)
-        sharp = softmax(counts / self.temperature_inliers)
-        return (1.0 - self.floor) * sharp + self.floor / n_rooms
-
-
-def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str]) -> np.ndarray:
-    """Best inlier count per room (order of ``rooms``), 0 for a room without evidence.
-
-    Raises ``ValueError`` for evidence naming a room not in ``rooms`` or a negative count.
-    """
-    index = _room_index(rooms)
-    best = np.zeros(len(index), dtype=float)
-    for item in evidence:
-        if item.room not in index:
-            raise ValueError(
-                f"evidence for place {item.place_id} names room {item.room!r}, "
-                f"which is not one of {list(index)}"
-            )
-        if item.inliers < 0:
-            raise ValueError(f"evidence for place {item.place_id} has {item.inliers} inliers")
-        i = index[item.room]
-        best[i] = max(best[i], float(item.inliers))
-    return best
-
-
-def room_likelihood(
-    evidence: Iterable[PlaceScore], rooms: Sequence[str], model: LikelihoodModel | None = None
-) -> np.ndarray:
-    """Likelihood per room (order of ``rooms``, sums to 1, every entry > 0) for one frame."""
-    return (model or LikelihoodModel()).from_room_inliers(room_inliers(evidence, rooms))
-
-
-def max_inliers(evidence: Iterable[PlaceScore]) -> int:
-    """The largest inlier count of one frame's evidence (0 if there is none)."""
-    return max((int(item.inliers) for item in evidence), default=0)
 
 
 # --------------------------------------------------------------------------------------------

@@ -11,24 +11,18 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from localizer.belief import (
-    BeliefFilter,
-    LikelihoodModel,
-    LocalizationState,
-    RoomBelief,
-    StateThresholds,
-    room_likelihood,
-)
+from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateThresholds
 from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
 from localizer.features import extract_with_camera
+from localizer.likelihood import Likelihood, RatioLikelihood, room_likelihood
 from localizer.policy import PlaceSimilarity
 from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
@@ -47,12 +41,14 @@ class LocalizerConfig:
     when the map has at least ``INDEX_MIN_PLACES`` places). ``camera``: the model of the
     panoramas to localize (:mod:`localizer.cameras`; ``auto`` by their size).
     ``stay_probability``: per move, the chance of staying in the same room (the prediction
-    along the room graph).
+    along the room graph). ``likelihood``: how a frame's evidence weighs the rooms (None: the
+    map's calibration, else :class:`~localizer.likelihood.RatioLikelihood`'s defaults); its
+    ``min_inliers`` is also the ``lost`` test.
     """
 
     detector: str = "sift"
     evidence: EvidenceParams = field(default_factory=EvidenceParams)
-    likelihood: LikelihoodModel = field(default_factory=LikelihoodModel)
+    likelihood: Likelihood | None = None
     thresholds: StateThresholds = field(default_factory=StateThresholds)
     stay_probability: float = 0.8
     use_index: bool | None = None
@@ -62,8 +58,9 @@ class LocalizerConfig:
 @dataclass(frozen=True, eq=False)
 class LoadedMap:
     """One detector's view of the map, ready to localize against: the stacked fingerprints and
-    every stored keypoint's unit ray (computed once here), the places, rooms, room graph and
-    the retrieval index. Built from a :class:`mapdb.records.MapSnapshot`; holds no database."""
+    every stored keypoint's unit ray (computed once here), the places, rooms, room graph, the
+    retrieval index and the likelihood calibrated on the map (None: not calibrated). Built from
+    a :class:`mapdb.records.MapSnapshot`; holds no database."""
 
     path: Path
     table: FingerprintTable
@@ -72,6 +69,7 @@ class LoadedMap:
     rooms: tuple[str, ...]
     edges: tuple[tuple[str, str], ...]
     index: PlaceIndex | None
+    likelihood: RatioLikelihood | None = None
 
     @classmethod
     def from_snapshot(cls, snapshot: MapSnapshot, use_index: bool | None = None) -> LoadedMap:
@@ -88,6 +86,11 @@ class LoadedMap:
             rooms=snapshot.rooms,
             edges=snapshot.edges,
             index=PlaceIndex.build(table) if use_index else None,
+            likelihood=(
+                None
+                if snapshot.likelihood is None
+                else RatioLikelihood.from_json(snapshot.likelihood)
+            ),
         )
 
     @cached_property
@@ -149,6 +152,9 @@ class Localizer:
         self.filter = BeliefFilter(loaded.rooms, loaded.edges, self.config.stay_probability)
         self.latest: Observation | None = None
         self._similarity: dict[tuple[int, int], int] = {}
+        self.likelihood: Likelihood = (
+            self.config.likelihood or loaded.likelihood or RatioLikelihood()
+        )
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read
@@ -180,9 +186,7 @@ class Localizer:
 
     def update(self, observation: Observation) -> RoomBelief:
         """Fold an observation into the belief (Bayes update) and return the new belief."""
-        likelihood = room_likelihood(
-            observation.evidence.places, self.map.rooms, self.config.likelihood
-        )
+        likelihood = room_likelihood(observation.evidence.places, self.map.rooms, self.likelihood)
         self.filter.update(likelihood)
         self.latest = observation
         return self.belief()
@@ -203,7 +207,7 @@ class Localizer:
         belief = RoomBelief.from_probabilities(
             self.map.rooms,
             self.filter.probabilities,
-            self.config.thresholds,
+            replace(self.config.thresholds, lost_min_inliers=self.likelihood.min_inliers),
             evidence,
             stamp_s=time.time(),
         )

@@ -28,7 +28,8 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from localizer.belief import PlaceScore, RoomBelief
+from localizer.belief import RoomBelief
+from localizer.likelihood import PlaceScore
 from mapdb.records import Place
 
 

@@ -9,8 +9,9 @@ naming the file. Fast bulk reads of fingerprints live in :mod:`mapdb.loading`.
 from __future__ import annotations
 
 import functools
+import json
 import sqlite3
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
@@ -31,7 +32,14 @@ from mapdb.errors import (
     translate_sqlite_error,
 )
 from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary
-from mapdb.schema import MIGRATIONS, SCHEMA_VERSION, Migration, migrate, read_schema_version
+from mapdb.schema import (
+    META_TABLE,
+    MIGRATIONS,
+    SCHEMA_VERSION,
+    Migration,
+    migrate,
+    read_schema_version,
+)
 
 _SELECT_PLACES = (
     "SELECT p.id, r.name, p.x_m, p.y_m, p.heading_deg, p.image_sha256, p.image_width_px, "
@@ -181,6 +189,32 @@ class MapDatabase:
     def schema_version(self) -> int:
         """The schema version stored in the file."""
         return read_schema_version(self.db) or 0
+
+    @_translated
+    def likelihood(self, detector: str) -> dict[str, Any] | None:
+        """The stored likelihood calibration of ``detector``'s evidence (JSON), or None."""
+        row = self.db.execute(
+            f"SELECT value FROM {META_TABLE} WHERE key = ?", [_likelihood_key(detector)]
+        ).fetchone()
+        if row is None:
+            return None
+        try:
+            value = json.loads(row[0])
+        except json.JSONDecodeError as error:
+            raise MapDatabaseError(
+                f"{self.path}: the stored likelihood of {detector!r} is not JSON ({error})",
+                self.path,
+            ) from None
+        return value if isinstance(value, dict) else None
+
+    @_translated
+    def set_likelihood(self, detector: str, calibration: Mapping[str, Any]) -> None:
+        """Store the likelihood calibration of ``detector`` (replacing an older one)."""
+        with self.transaction():
+            self.db.execute(
+                f"INSERT OR REPLACE INTO {META_TABLE} (key, value) VALUES (?, ?)",
+                [_likelihood_key(detector), json.dumps(dict(calibration), sort_keys=True)],
+            )
 
     def _room_id(self, name: str) -> int | None:
         row = self.db.execute("SELECT id FROM rooms WHERE name = ?", [name]).fetchone()
@@ -363,3 +397,8 @@ def _inserted_id(table: sqlite_utils.db.Table) -> int:
     if table.last_pk is None:
         raise RuntimeError(f"insert into {table.name} returned no row id")
     return int(table.last_pk)
+
+
+def _likelihood_key(detector: str) -> str:
+    """The ``meta`` key of a detector's likelihood calibration."""
+    return f"likelihood:{detector}"

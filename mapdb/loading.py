@@ -28,7 +28,7 @@ from mapdb.codec import (
     fingerprint_from_row,
 )
 from mapdb.database import MapDatabase
-from mapdb.errors import translate_sqlite_error
+from mapdb.errors import SchemaVersionError, translate_sqlite_error
 from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
 
 _SELECT = (
@@ -119,6 +119,18 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
     )
 
 
+def open_for_reading(path: Path) -> MapDatabase:
+    """The map at ``path`` opened read-only; a map made by an older toploc is migrated first
+    (one write, as any writing command would do), so it still opens."""
+    try:
+        return MapDatabase.open(path, create=False, readonly=True)
+    except SchemaVersionError as error:
+        if "older" not in str(error):
+            raise
+    MapDatabase.open(path, create=False).close()  # migrates, or names why it cannot
+    return MapDatabase.open(path, create=False, readonly=True)
+
+
 def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     """Read what a localizer needs from the map at ``path`` (read-only, then closed).
 
@@ -126,14 +138,15 @@ def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     errors are :class:`mapdb.errors.MapDatabaseError`.
     """
     path = Path(path)
-    with MapDatabase.open(path, create=False, readonly=True) as map_db:
+    with open_for_reading(path) as map_db:
         table = load_fingerprint_table(map_db, detector)
         places = map_db.places()
         rooms = tuple(room.name for room in map_db.rooms())
         edges = tuple(map_db.edges())
+        likelihood = map_db.likelihood(detector)
     if not len(table.place_ids):
         raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
     with_fingerprint = {int(p) for p in table.place_ids}
     kept = tuple(p for p in places if p.id in with_fingerprint)
     kept_rooms = tuple(r for r in rooms if any(p.room == r for p in kept))
-    return MapSnapshot(path, table, kept, kept_rooms, edges)
+    return MapSnapshot(path, table, kept, kept_rooms, edges, likelihood)

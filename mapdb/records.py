@@ -256,10 +256,12 @@ class FingerprintTable:
 @dataclass(frozen=True)
 class MapSnapshot:
     """What a localizer reads from a map once at start-up: one detector's fingerprints stacked,
-    the places that have one, the rooms that have such places, and the room graph."""
+    the places that have one, the rooms that have such places, the room graph, and the
+    likelihood calibrated on that detector's evidence (JSON; None if the map has none)."""
 
     path: Path
     table: FingerprintTable
     places: tuple[Place, ...]
     rooms: tuple[str, ...]
     edges: tuple[tuple[str, str], ...]
+    likelihood: Mapping[str, Any] | None = None

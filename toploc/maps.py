@@ -13,6 +13,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
+from localizer.calibration import MAX_QUERIES, calibrate
+from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
@@ -35,6 +39,25 @@ def load_map(
     database closed again). Raises ``ValueError`` if it has no ``detector`` fingerprint and
     :class:`mapdb.errors.MapDatabaseError` for a missing, locked or damaged file."""
     return LoadedMap.from_snapshot(load_snapshot(db_path, detector), use_index)
+
+
+def calibrate_map(
+    db_path: Path | str, detector: str = "sift", progress: bool = False
+) -> RatioLikelihood:
+    """Fit the likelihood of ``detector``'s evidence on the map's own places (leave-one-out,
+    :mod:`localizer.calibration`) and store it in the map; returns it. Raises ``ValueError`` if
+    the map has no ``detector`` fingerprint."""
+    loaded = load_map(db_path, detector)
+    total = min(MAX_QUERIES, len(loaded.table.place_ids))
+    with tqdm(total=total, desc=f"calibrate {detector}", unit="query", disable=not progress) as bar:
+
+        def tick() -> None:
+            bar.update(1)
+
+        likelihood, _ = calibrate(loaded, on_query=tick)
+    with MapDatabase.open(db_path, create=False) as map_db:
+        map_db.set_likelihood(detector, likelihood.to_json())
+    return likelihood
 
 
 def kidnapped_robot(
@@ -77,6 +100,7 @@ def ensure_world_map(
     dataset, db_path = folder / "dataset", folder / "map.db"
     done_marker = folder / f"built-{detector}"
     if done_marker.exists() and db_path.exists():
+        _calibrate_once(db_path, detector, progress)
         return db_path
     if not (dataset / MANIFEST_NAME).exists():
         render_dataset(dataset, world, seed=seed, overwrite=True, progress=progress)
@@ -89,5 +113,14 @@ def ensure_world_map(
     failed = [o.image for o in report.outcomes if o.status is Status.FAILED]
     if failed:
         raise RuntimeError(f"{len(failed)} panorama(s) of {dataset} failed: {', '.join(failed)}")
+    _calibrate_once(db_path, detector, progress)
     done_marker.touch()
     return db_path
+
+
+def _calibrate_once(db_path: Path, detector: str, progress: bool) -> None:
+    """Calibrate the map's likelihood unless it has been (maps cached by older versions)."""
+    with MapDatabase.open(db_path, create=False) as map_db:
+        done = map_db.likelihood(detector) is not None
+    if not done:
+        calibrate_map(db_path, detector, progress)

@@ -12,17 +12,16 @@ from hypothesis import strategies as st
 
 from localizer.belief import (
     BeliefFilter,
-    LikelihoodModel,
     LocalizationState,
     RoomBelief,
     StateThresholds,
     classify,
     entropy_bits,
     predict_on_graph,
-    room_inliers,
-    room_likelihood,
     transition_matrix,
 )
+from localizer.likelihood import SoftmaxLikelihood as LikelihoodModel
+from localizer.likelihood import room_inliers, room_likelihood
 
 ROOMS = ("office_a", "office_b", "corridor", "lab", "kitchen")
 EDGES = (("office_a", "corridor"), ("office_b", "corridor"), ("lab", "corridor"))
@@ -209,9 +208,10 @@ def test_belief_stays_a_distribution(prior, counts, moves):
 
 
 def test_consistent_updates_converge_to_localized():
+    # the softmax model: a 10-inlier lead counts the same at any level
     belief = BeliefFilter(ROOMS, EDGES)
     evidence = evidence_for({"office_a": 310, "office_b": 300, "corridor": 15, "lab": 12})
-    lik = room_likelihood(evidence, ROOMS)
+    lik = room_likelihood(evidence, ROOMS, LikelihoodModel())
     states = []
     for _ in range(6):
         belief.update(lik)

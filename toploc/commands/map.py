@@ -21,6 +21,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from localizer.likelihood import RatioLikelihood
 from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
@@ -87,6 +88,12 @@ db_option = click.option(
     type=click.Path(dir_okay=False, path_type=Path),
     help="The map database file (SQLite).",
 )
+calibrate_option = click.option(
+    "--calibrate/--no-calibrate",
+    default=True,
+    show_default=True,
+    help="Fit the likelihood on the map's own places afterwards (see `toploc map calibrate`).",
+)
 detector_option = click.option(
     "--detector",
     "detectors",
@@ -113,6 +120,7 @@ def map_group() -> None:
     help="Extraction processes (0 or 1: in this process).",
 )
 @camera_option
+@calibrate_option
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 @click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
 def build_command(
@@ -121,6 +129,7 @@ def build_command(
     detectors: str,
     workers: int,
     camera: str,
+    calibrate: bool,
     progress: bool,
     verbose: bool,
 ) -> None:
@@ -146,6 +155,8 @@ def build_command(
                 added = connect_known_rooms(map_db, edges)
                 if added:
                     click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
+        if calibrate and not report.interrupted and report.count(Status.ADDED):
+            _calibrate(db_path, presets, progress)
     _finish(report, db_path, verbose)
 
 
@@ -158,6 +169,7 @@ def build_command(
 @click.option("--heading-deg", type=float, default=None, help="Heading in the room, degrees CCW.")
 @detector_option
 @camera_option
+@calibrate_option
 def add_command(
     image: Path,
     db_path: Path,
@@ -167,6 +179,7 @@ def add_command(
     heading_deg: float | None,
     detectors: str,
     camera: str,
+    calibrate: bool,
 ) -> None:
     """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
     if (x_m is None) != (y_m is None):
@@ -182,6 +195,53 @@ def add_command(
     if outcome.status is Status.FAILED:
         raise click.ClickException(f"{image}: {outcome.message}")
     click.echo(outcome.describe())
+    if calibrate and outcome.status is Status.ADDED:
+        with _map_errors():
+            _calibrate(db_path, presets, progress=False)
+
+
+@map_group.command("calibrate")
+@db_option
+@detector_option
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
+def calibrate_command(db_path: Path, detectors: str, progress: bool) -> None:
+    """Fit the likelihood of each detector's evidence on the map's own places and store it.
+
+    Each of up to 60 places, spread over the rooms, is localized against the map without it;
+    the inliers of its own room and of the other rooms give the model (README, "Localization").
+    `map build` and `map add` do this themselves unless --no-calibrate is given.
+    """
+    with _map_errors():
+        _calibrate(db_path, parse_detectors(detectors), progress)
+
+
+def _calibrate(db_path: Path, presets: tuple[str, ...], progress: bool) -> None:
+    """Calibrate and store the likelihood of every preset's detector; one line each."""
+    from localizer.features import params_from_preset
+    from toploc.maps import calibrate_map
+
+    for preset in presets:
+        detector = params_from_preset(preset).detector
+        try:
+            model = calibrate_map(db_path, detector, progress)
+        except ValueError as error:
+            raise click.ClickException(str(error)) from error
+        click.echo(f"{db_path}: {detector} likelihood {describe_likelihood(model)}")
+
+
+def describe_likelihood(model: RatioLikelihood) -> str:
+    """One line: the fitted ratio and where it came from."""
+    fit = model.fit
+    where = (
+        f"fitted on {fit['n_same_room']:.0f} same-room and {fit['n_other_room']:.0f} other-room "
+        f"counts (medians {fit['same_room_median']:.0f} and {fit['other_room_median']:.0f})"
+        if fit
+        else "left at the defaults (no room has two places)"
+    )
+    return (
+        f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n), lost below "
+        f"{model.min_inliers} inliers; {where}"
+    )
 
 
 @map_group.command("connect")

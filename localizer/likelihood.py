@@ -1,0 +1,326 @@
+"""How one frame's evidence becomes a likelihood per room, calibrated on the map's own evidence.
+
+For each room take ``n_r``, the inlier count of its best place in the frame (0 if none of its
+places was verified). The question a count answers is: is this what the robot's own room gives,
+or what an unrelated room gives by chance? :class:`RatioLikelihood` answers it with the ratio of
+the two densities,
+
+    L_r = p(n_r | same room) / p(n_r | other room) = exp(intercept + slope * log(1 + n_r)),
+
+a power law in ``1 + n``, fitted by :func:`fit_ratio_likelihood` as a class-balanced logistic
+regression of "same room" on ``log(1 + n)`` (so the fitted log-odds are the log density ratio).
+The samples come from leave-one-out over the map's places (:mod:`localizer.calibration`): each
+place is a query against the map without it; its own room's best remaining place gives a
+same-room count, every other room's best place an other-room count. This is the same idea as
+RTAB-Map normalising a new image's scores by their distribution and FAB-MAP's explicit model of
+unrelated places: the map tells what chance looks like in its own rooms.
+
+Why this shape:
+
+- The ratio does not depend on the number of rooms, so 15 rooms do not cap one frame's
+  confidence (the softmax of :class:`SoftmaxLikelihood` did: a 29-versus-7 margin gave 25 %).
+- Under "the robot is in room r", room r's count follows the same-room density and every other
+  room's the other-room density, so the frame's likelihood of room r is proportional to
+  ``L_r`` and a flat ``L`` means the frame cannot tell rooms apart.
+- ``min_inliers``: a frame whose best count is below what the best of the unrelated rooms
+  typically reaches by chance (the ``known_quantile``, by default the median, of the per-query
+  maximum over the other rooms in the leave-one-out) says the panorama may come from no room of
+  the map: its likelihood is flat and the state ``lost``. Above it, a room that is not in the
+  map still has to beat every other room by the localized ratio on chance counts alone.
+- A logistic fit with a ridge towards the defaults behaves with a dozen samples, and the log
+  ratio is clipped at ``max_log_ratio`` (a frame can move the odds of two rooms by at most
+  ``e^max_log_ratio``) so that one mis-verified frame can be outvoted later.
+
+Pure core: numpy and scipy, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.special import softmax
+
+LIKELIHOOD_SCHEMA = 1
+
+
+class PlaceScore(Protocol):
+    """Evidence for one stored place: its id, its room and the verified inlier count."""
+
+    @property
+    def place_id(self) -> int: ...
+
+    @property
+    def room(self) -> str: ...
+
+    @property
+    def inliers(self) -> int: ...
+
+
+class Likelihood(Protocol):
+    """A model turning the best inlier count per room into a likelihood per room."""
+
+    @property
+    def min_inliers(self) -> int:
+        """Below this best count the frame says nothing (flat likelihood; state lost)."""
+        ...
+
+    def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
+        """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
+        ...
+
+
+def _check_counts(room_inliers: np.ndarray) -> np.ndarray:
+    counts = np.asarray(room_inliers, dtype=float)
+    if counts.ndim != 1 or counts.size == 0:
+        raise ValueError(f"room_inliers must be a non-empty 1-D array, got shape {counts.shape}")
+    if not np.all(np.isfinite(counts)) or np.any(counts < 0):
+        raise ValueError(f"room_inliers must be finite and >= 0, got {counts.tolist()}")
+    return counts
+
+
+@dataclass(frozen=True)
+class RatioLikelihood:
+    """The calibrated likelihood of the module docstring.
+
+    ``intercept``, ``slope``: the log density ratio ``intercept + slope * log(1 + n)``.
+    ``min_inliers``: below this best count the frame is flat and ``lost``. ``max_log_ratio``:
+    the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
+    of the counts; empty for the defaults), for ``toploc map info`` and the README.
+
+    The defaults (used for a map that cannot be calibrated: fewer than two places in every room)
+    are the fit on the rendered ``building`` map (103 places, 1.3 m apart), see the README.
+    """
+
+    intercept: float = -8.0
+    slope: float = 1.9
+    min_inliers: int = 12
+    max_log_ratio: float = 25.0
+    fit: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.intercept) and math.isfinite(self.slope)):
+            raise ValueError(f"intercept and slope must be finite, got {self}")
+        if self.slope < 0:
+            raise ValueError(f"slope must be >= 0 (more inliers never count against), got {self}")
+        if self.min_inliers < 0:
+            raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
+        if not self.max_log_ratio > 0:
+            raise ValueError(f"max_log_ratio must be positive, got {self.max_log_ratio}")
+
+    def log_ratio(self, inliers: np.ndarray | float) -> np.ndarray:
+        """``log p(n | same room) / p(n | other room)`` for inlier counts ``n``, clipped."""
+        n = np.asarray(inliers, dtype=float)
+        value = self.intercept + self.slope * np.log1p(n)
+        return np.clip(value, -self.max_log_ratio, self.max_log_ratio)
+
+    def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
+        """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
+        counts = _check_counts(room_inliers)
+        if counts.max() < self.min_inliers:
+            return np.full(counts.size, 1.0 / counts.size)
+        return softmax(self.log_ratio(counts))  # the ratios, normalised without overflow
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict (stored in the map)."""
+        return {
+            "schema": LIKELIHOOD_SCHEMA,
+            "model": "ratio",
+            "intercept": self.intercept,
+            "slope": self.slope,
+            "min_inliers": self.min_inliers,
+            "max_log_ratio": self.max_log_ratio,
+            "fit": dict(self.fit),
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> RatioLikelihood:
+        """Inverse of :meth:`to_json`; ``ValueError`` naming what is wrong."""
+        if data.get("schema") != LIKELIHOOD_SCHEMA or data.get("model") != "ratio":
+            raise ValueError(
+                f"not a ratio likelihood of schema {LIKELIHOOD_SCHEMA}: "
+                f"schema {data.get('schema')!r}, model {data.get('model')!r}"
+            )
+        try:
+            return cls(
+                intercept=float(data["intercept"]),
+                slope=float(data["slope"]),
+                min_inliers=int(data["min_inliers"]),
+                max_log_ratio=float(data["max_log_ratio"]),
+                fit={str(k): float(v) for k, v in dict(data.get("fit", {})).items()},
+            )
+        except (KeyError, TypeError, ValueError) as error:
+            raise ValueError(f"bad stored likelihood {dict(data)}: {error}") from error
+
+
+@dataclass(frozen=True)
+class CalibrationSamples:
+    """Leave-one-out evidence of a map: per query place, its own room's best count among the
+    other places (``same_room``, only for rooms with two or more places), every other room's best
+    count (``other_room``), and the largest of those per query (``max_other``).
+
+    A room that explains a query at least as well as the query's own room (and the own room did
+    match, ``own >= lookalike_min_inliers``) is a look-alike of it (the two offices of the
+    ``building`` world): its count is what the query's own room gives, not chance, so it is
+    counted in ``n_lookalike`` and left out of ``other_room`` and ``max_other``. Look-alike rooms
+    cannot be told apart by one view anyway; both get a high likelihood and the belief stays
+    ambiguous until the robot drives to a telling place.
+    """
+
+    same_room: np.ndarray
+    other_room: np.ndarray
+    max_other: np.ndarray
+    n_lookalike: int = 0
+
+    @classmethod
+    def from_queries(
+        cls,
+        queries: Iterable[tuple[str, Mapping[str, float]]],
+        room_sizes: Mapping[str, int],
+        lookalike_min_inliers: float = 20.0,
+    ) -> CalibrationSamples:
+        """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
+        per room) says whether the query's room had another place to match."""
+        same: list[float] = []
+        other: list[float] = []
+        max_other: list[float] = []
+        n_lookalike = 0
+        for own_room, best in queries:
+            own = float(best.get(own_room, 0.0))
+            has_own = room_sizes.get(own_room, 0) >= 2
+            others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
+            if has_own and own >= lookalike_min_inliers:
+                kept = [count for count in others if count < own]
+                n_lookalike += len(others) - len(kept)
+                others = kept
+            if has_own:
+                same.append(own)
+            other += others
+            if others:
+                max_other.append(max(others))
+        return cls(np.array(same), np.array(other), np.array(max_other), n_lookalike)
+
+
+def _balanced_logistic_loss(
+    params: np.ndarray, x: np.ndarray, y: np.ndarray, w: np.ndarray, prior: np.ndarray, ridge: float
+) -> float:
+    z = params[0] + params[1] * x
+    # log(1 + exp(-z)) for y = 1 and log(1 + exp(z)) for y = 0, computed stably
+    loss = np.where(y > 0, np.logaddexp(0.0, -z), np.logaddexp(0.0, z))
+    return float(np.sum(w * loss) + ridge * np.sum((params - prior) ** 2))
+
+
+def fit_ratio_likelihood(
+    samples: CalibrationSamples,
+    prior: RatioLikelihood | None = None,
+    ridge: float = 1.0,
+    known_quantile: float = 0.5,
+) -> RatioLikelihood:
+    """Fit the log density ratio to ``samples`` (see the module docstring).
+
+    Each class carries half the weight whatever its size, so the fitted log-odds are the log
+    density ratio. ``ridge`` pulls intercept and slope towards ``prior`` (the defaults) like that
+    many pseudo-samples. ``min_inliers`` is one more than the ``known_quantile`` of the
+    per-query maximum other-room count (never below the prior's). Without same-room samples
+    (every room has one place) nothing can be fitted and ``prior`` is returned.
+    """
+    prior = prior or RatioLikelihood()
+    same, other = samples.same_room, samples.other_room
+    if len(same) == 0 or len(other) == 0:
+        return prior
+    x = np.log1p(np.concatenate([same, other]))
+    y = np.concatenate([np.ones(len(same)), np.zeros(len(other))])
+    w = np.concatenate([np.full(len(same), 0.5 / len(same)), np.full(len(other), 0.5 / len(other))])
+    start = np.array([prior.intercept, prior.slope])
+    scale = ridge / (len(same) + len(other))
+    result = minimize(
+        _balanced_logistic_loss,
+        start,
+        args=(x, y, w, start, scale),
+        method="L-BFGS-B",
+        bounds=[(None, None), (0.0, None)],
+    )
+    intercept, slope = (float(v) for v in result.x)
+    chance = float(np.quantile(samples.max_other, known_quantile)) if len(samples.max_other) else 0
+    fit = {
+        "n_same_room": float(len(same)),
+        "n_other_room": float(len(other)),
+        "n_lookalike": float(samples.n_lookalike),
+        "same_room_median": float(np.median(same)),
+        "other_room_median": float(np.median(other)),
+        "other_room_p95": float(np.quantile(other, 0.95)),
+        "max_other_quantile": chance,
+        "known_quantile": known_quantile,
+    }
+    min_inliers = max(prior.min_inliers, math.floor(chance) + 1)
+    return replace(prior, intercept=intercept, slope=slope, min_inliers=min_inliers, fit=fit)
+
+
+@dataclass(frozen=True)
+class SoftmaxLikelihood:
+    """The uncalibrated model toploc used before :class:`RatioLikelihood`, kept for synthetic
+    experiments whose counts have no map to be calibrated on.
+
+    ``L_r = (1 - floor) * softmax(n / temperature_inliers)_r + floor / N`` (flat below
+    ``min_inliers``): it depends only on count differences and saturates, so N rooms cap one
+    frame at ``1 - floor + floor / N``.
+    """
+
+    temperature_inliers: float = 15.0
+    floor: float = 0.05
+    min_inliers: int = 20
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.temperature_inliers) and self.temperature_inliers > 0):
+            raise ValueError(
+                f"temperature_inliers must be positive and finite, got {self.temperature_inliers}"
+            )
+        if not 0.0 < self.floor <= 1.0:
+            raise ValueError(f"floor must be in (0, 1], got {self.floor}")
+        if self.min_inliers < 0:
+            raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
+
+    def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
+        """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
+        counts = _check_counts(room_inliers)
+        if counts.max() < self.min_inliers:
+            return np.full(counts.size, 1.0 / counts.size)
+        sharp = softmax(counts / self.temperature_inliers)
+        return (1.0 - self.floor) * sharp + self.floor / counts.size
+
+
+def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str]) -> np.ndarray:
+    """Best inlier count per room (order of ``rooms``), 0 for a room without evidence.
+
+    Raises ``ValueError`` for evidence naming a room not in ``rooms`` or a negative count.
+    """
+    index = {room: i for i, room in enumerate(rooms)}
+    best = np.zeros(len(index), dtype=float)
+    for item in evidence:
+        if item.room not in index:
+            raise ValueError(
+                f"evidence for place {item.place_id} names room {item.room!r}, "
+                f"which is not one of {list(index)}"
+            )
+        if item.inliers < 0:
+            raise ValueError(f"evidence for place {item.place_id} has {item.inliers} inliers")
+        i = index[item.room]
+        best[i] = max(best[i], float(item.inliers))
+    return best
+
+
+def room_likelihood(
+    evidence: Iterable[PlaceScore], rooms: Sequence[str], model: Likelihood | None = None
+) -> np.ndarray:
+    """Likelihood per room (order of ``rooms``, sums to 1, every entry > 0) for one frame;
+    ``model`` defaults to :class:`RatioLikelihood`'s defaults."""
+    return (model or RatioLikelihood()).from_room_inliers(room_inliers(evidence, rooms))
+
+
+def max_inliers(evidence: Iterable[PlaceScore]) -> int:
+    """The largest inlier count of one frame's evidence (0 if there is none)."""
+    return max((int(item.inliers) for item in evidence), default=0)

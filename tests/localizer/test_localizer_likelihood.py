@@ -1,0 +1,91 @@
+"""The calibrated likelihood: a density ratio of same-room and other-room inlier counts, fitted
+on leave-one-out evidence; rooms do not cap a frame, and chance counts stay lost."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localizer.likelihood import (
+    CalibrationSamples,
+    RatioLikelihood,
+    SoftmaxLikelihood,
+    fit_ratio_likelihood,
+)
+
+
+def samples(rng: np.random.Generator, n_queries: int, n_rooms: int) -> CalibrationSamples:
+    """Same-room counts around 25, other-room counts around 6 (Poisson), like a bare house."""
+    queries = []
+    for q in range(n_queries):
+        own = f"r{q % n_rooms}"
+        best = {f"r{r}": float(rng.poisson(6)) for r in range(n_rooms)}
+        best[own] = float(rng.poisson(25))
+        queries.append((own, best))
+    return CalibrationSamples.from_queries(queries, {f"r{r}": 3 for r in range(n_rooms)})
+
+
+def test_samples_split_own_room_and_the_others() -> None:
+    queries = [("a", {"a": 30.0, "b": 4.0}), ("b", {"a": 9.0}), ("c", {"a": 2.0, "b": 1.0})]
+    got = CalibrationSamples.from_queries(queries, {"a": 2, "b": 2, "c": 1})
+    np.testing.assert_array_equal(got.same_room, [30.0, 0.0])  # b's own room got nothing
+    np.testing.assert_array_equal(got.other_room, [4.0, 0.0, 9.0, 0.0, 2.0, 1.0])
+    np.testing.assert_array_equal(got.max_other, [4.0, 9.0, 2.0])  # c has one place: no same
+
+
+def test_the_fit_separates_same_from_other_rooms() -> None:
+    model = fit_ratio_likelihood(samples(np.random.default_rng(0), 60, 6))
+    assert model.log_ratio(25) > 2.0  # a typical own-room count is strong evidence
+    assert model.log_ratio(6) < -1.0  # a typical chance count argues against the room
+    assert np.all(np.diff(model.log_ratio(np.arange(60))) >= 0)  # more inliers never hurt
+    assert model.fit["n_same_room"] == 60 and model.fit["n_other_room"] == 300
+
+
+def test_chance_counts_of_a_room_not_in_the_map_are_lost() -> None:
+    rng = np.random.default_rng(1)
+    model = fit_ratio_likelihood(samples(rng, 60, 6))
+    # a query from a seventh room: every room of the map scores by chance only
+    unknown = [rng.poisson(6, size=6).astype(float) for _ in range(200)]
+    flat = [np.ptp(model.from_room_inliers(counts)) == 0 for counts in unknown]
+    assert np.mean(flat) >= 0.9
+    assert model.min_inliers > np.median([c.max() for c in unknown])
+
+
+def test_the_number_of_rooms_does_not_cap_one_frame() -> None:
+    model, softmax = RatioLikelihood(), SoftmaxLikelihood()
+    for n_rooms in (2, 15, 60):
+        counts = np.full(n_rooms, 7.0)
+        counts[0] = 300.0
+        strong = counts.copy()
+        strong[0] = 1000.0
+        # the confidence grows with the margin, whatever the number of rooms
+        assert model.from_room_inliers(strong)[0] > max(0.99, model.from_room_inliers(counts)[0])
+        # the old model: one frame saturates below 1 - floor + floor / N
+        cap = 0.95 + 0.05 / n_rooms + 1e-12
+        assert softmax.from_room_inliers(strong)[0] == pytest.approx(
+            softmax.from_room_inliers(counts)[0]
+        )
+        assert softmax.from_room_inliers(strong)[0] <= cap
+    counts = np.full(15, 7.0)
+    counts[0] = 29.0
+    assert softmax.from_room_inliers(counts)[0] < 0.3  # the 25 % a user measured
+
+
+def test_without_same_room_samples_the_defaults_stay() -> None:
+    one_place_each = CalibrationSamples.from_queries(
+        [("a", {"b": 3.0}), ("b", {"a": 5.0})], {"a": 1, "b": 1}
+    )
+    assert fit_ratio_likelihood(one_place_each) == RatioLikelihood()
+
+
+def test_json_round_trip_and_bad_input() -> None:
+    model = fit_ratio_likelihood(samples(np.random.default_rng(2), 30, 4))
+    assert RatioLikelihood.from_json(model.to_json()) == model
+    with pytest.raises(ValueError, match="not a ratio likelihood"):
+        RatioLikelihood.from_json({"schema": 1, "model": "softmax"})
+    with pytest.raises(ValueError, match="bad stored likelihood"):
+        RatioLikelihood.from_json({"schema": 1, "model": "ratio", "intercept": "x"})
+    with pytest.raises(ValueError, match="slope must be >= 0"):
+        RatioLikelihood(slope=-1.0)
+    with pytest.raises(ValueError, match="room_inliers must be finite"):
+        model.from_room_inliers(np.array([1.0, np.nan]))
