@@ -29,9 +29,8 @@ from localizer.likelihood import (
 )
 from localizer.localizer import LoadedMap
 
-
 MAX_QUERIES = 60
-"""Leave-one-out queries per calibration: about 20 s on a 2-core machine, whatever the map's size."""
+"""Leave-one-out queries per calibration: about 20 s here, whatever the size of the map."""
 
 
 def query_places(rooms: Sequence[str], max_queries: int) -> list[int]:

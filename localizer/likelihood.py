@@ -5,10 +5,14 @@ places was verified). The question a count answers is: is this what the robot's 
 or what an unrelated room gives by chance? :class:`RatioLikelihood` answers it with the ratio of
 the two densities,
 
-    L_r = p(n_r | same room) / p(n_r | other room) = exp(intercept + slope * log(1 + n_r)),
+    L_r = p(n_r | same room) / p(n_r | other room)
+        = exp(intercept + slope * log(1 + n_r) + per_inlier * n_r),
 
-a power law in ``1 + n``, fitted by :func:`fit_ratio_likelihood` as a class-balanced logistic
-regression of "same room" on ``log(1 + n)`` (so the fitted log-odds are the log density ratio).
+fitted by :func:`fit_ratio_likelihood` as a class-balanced logistic regression of "same room"
+on ``log(1 + n)`` and ``n`` (so the fitted log-odds are the log density ratio). The logarithm
+carries the few-inlier range of bare rooms (7 against 25 inliers is a strong hint, 207 against
+225 is not); the linear term lets a map whose other rooms reach hundreds of inliers by shared
+texture say how much an absolute lead is worth there.
 The samples come from leave-one-out over the map's places (:mod:`localizer.calibration`): each
 place is a query against the map without it; its own room's best remaining place gives a
 same-room count, every other room's best place an other-room count. This is the same idea as
@@ -87,7 +91,8 @@ def _check_counts(room_inliers: np.ndarray) -> np.ndarray:
 class RatioLikelihood:
     """The calibrated likelihood of the module docstring.
 
-    ``intercept``, ``slope``: the log density ratio ``intercept + slope * log(1 + n)``.
+    ``intercept``, ``slope``, ``per_inlier``: the log density ratio
+    ``intercept + slope * log(1 + n) + per_inlier * n``.
     ``min_inliers``: below this best count the frame is flat and ``lost``. ``max_log_ratio``:
     the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
     of the counts; empty for the defaults), for ``toploc map info`` and the README.
@@ -98,15 +103,18 @@ class RatioLikelihood:
 
     intercept: float = -8.0
     slope: float = 1.9
+    per_inlier: float = 0.0
     min_inliers: int = 12
     max_log_ratio: float = 25.0
     fit: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.intercept) and math.isfinite(self.slope)):
-            raise ValueError(f"intercept and slope must be finite, got {self}")
-        if self.slope < 0:
-            raise ValueError(f"slope must be >= 0 (more inliers never count against), got {self}")
+        if not all(math.isfinite(v) for v in (self.intercept, self.slope, self.per_inlier)):
+            raise ValueError(f"intercept, slope and per_inlier must be finite, got {self}")
+        if self.slope < 0 or self.per_inlier < 0:
+            raise ValueError(
+                f"slope and per_inlier must be >= 0 (more inliers never count against), got {self}"
+            )
         if self.min_inliers < 0:
             raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
         if not self.max_log_ratio > 0:
@@ -115,7 +123,7 @@ class RatioLikelihood:
     def log_ratio(self, inliers: np.ndarray | float) -> np.ndarray:
         """``log p(n | same room) / p(n | other room)`` for inlier counts ``n``, clipped."""
         n = np.asarray(inliers, dtype=float)
-        value = self.intercept + self.slope * np.log1p(n)
+        value = self.intercept + self.slope * np.log1p(n) + self.per_inlier * n
         return np.clip(value, -self.max_log_ratio, self.max_log_ratio)
 
     def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
@@ -132,6 +140,7 @@ class RatioLikelihood:
             "model": "ratio",
             "intercept": self.intercept,
             "slope": self.slope,
+            "per_inlier": self.per_inlier,
             "min_inliers": self.min_inliers,
             "max_log_ratio": self.max_log_ratio,
             "fit": dict(self.fit),
@@ -149,6 +158,7 @@ class RatioLikelihood:
             return cls(
                 intercept=float(data["intercept"]),
                 slope=float(data["slope"]),
+                per_inlier=float(data.get("per_inlier", 0.0)),
                 min_inliers=int(data["min_inliers"]),
                 max_log_ratio=float(data["max_log_ratio"]),
                 fit={str(k): float(v) for k, v in dict(data.get("fit", {})).items()},
@@ -205,10 +215,14 @@ class CalibrationSamples:
         return cls(np.array(same), np.array(other), np.array(max_other), n_lookalike)
 
 
+INLIER_SCALE = 100.0
+"""The linear feature is ``n / INLIER_SCALE`` in the fit, so both features are of order 1."""
+
+
 def _balanced_logistic_loss(
     params: np.ndarray, x: np.ndarray, y: np.ndarray, w: np.ndarray, prior: np.ndarray, ridge: float
 ) -> float:
-    z = params[0] + params[1] * x
+    z = params[0] + x @ params[1:]
     # log(1 + exp(-z)) for y = 1 and log(1 + exp(z)) for y = 0, computed stably
     loss = np.where(y > 0, np.logaddexp(0.0, -z), np.logaddexp(0.0, z))
     return float(np.sum(w * loss) + ridge * np.sum((params - prior) ** 2))
@@ -232,19 +246,20 @@ def fit_ratio_likelihood(
     same, other = samples.same_room, samples.other_room
     if len(same) == 0 or len(other) == 0:
         return prior
-    x = np.log1p(np.concatenate([same, other]))
+    counts = np.concatenate([same, other])
+    x = np.column_stack([np.log1p(counts), counts / INLIER_SCALE])
     y = np.concatenate([np.ones(len(same)), np.zeros(len(other))])
     w = np.concatenate([np.full(len(same), 0.5 / len(same)), np.full(len(other), 0.5 / len(other))])
-    start = np.array([prior.intercept, prior.slope])
+    start = np.array([prior.intercept, prior.slope, prior.per_inlier * INLIER_SCALE])
     scale = ridge / (len(same) + len(other))
     result = minimize(
         _balanced_logistic_loss,
         start,
         args=(x, y, w, start, scale),
         method="L-BFGS-B",
-        bounds=[(None, None), (0.0, None)],
+        bounds=[(None, None), (0.0, None), (0.0, None)],
     )
-    intercept, slope = (float(v) for v in result.x)
+    intercept, slope, per_hundred = (float(v) for v in result.x)
     chance = float(np.quantile(samples.max_other, known_quantile)) if len(samples.max_other) else 0
     fit = {
         "n_same_room": float(len(same)),
@@ -257,7 +272,14 @@ def fit_ratio_likelihood(
         "known_quantile": known_quantile,
     }
     min_inliers = max(prior.min_inliers, math.floor(chance) + 1)
-    return replace(prior, intercept=intercept, slope=slope, min_inliers=min_inliers, fit=fit)
+    return replace(
+        prior,
+        intercept=intercept,
+        slope=slope,
+        per_inlier=per_hundred / INLIER_SCALE,
+        min_inliers=min_inliers,
+        fit=fit,
+    )
 
 
 @dataclass(frozen=True)

@@ -239,8 +239,8 @@ def describe_likelihood(model: RatioLikelihood) -> str:
         else "left at the defaults (no room has two places)"
     )
     return (
-        f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n), lost below "
-        f"{model.min_inliers} inliers; {where}"
+        f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
+        f"{model.per_inlier:.4f} n, lost below {model.min_inliers} inliers; {where}"
     )
 
 
