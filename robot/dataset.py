@@ -47,7 +47,7 @@ class ManifestRow:
     heading_deg: float | None
 
 
-def _prepare_folder(out_dir: Path, overwrite: bool) -> None:
+def prepare_folder(out_dir: Path, overwrite: bool) -> None:
     """Create ``out_dir``; refuse a non-empty one unless ``overwrite`` (then clear our files)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"output path {str(out_dir)!r} exists and is not a folder")
@@ -79,7 +79,8 @@ def render_dataset(
 
     ``spacing_m`` is the capture grid spacing (default: the world's); ``seed`` builds the world,
     places the condition's objects and seeds the sensor noise; ``heading_deg`` is the heading of
-    every capture in room frames, or None for seeded uniform random headings. Raises
+    every capture in room frames, or None for seeded uniform random headings; ``camera``
+    defaults to a 1024 x 192 cylinder at the world's camera height. Raises
     ``ValueError`` naming the bad value for an unknown world or condition, a non-positive
     spacing, or a non-empty ``out_dir`` without ``overwrite``.
     """
@@ -89,10 +90,10 @@ def render_dataset(
         raise ValueError(f"spacing_m must be positive, got {spacing_m}")
     if heading_deg is not None and not math.isfinite(heading_deg):
         raise ValueError(f"heading_deg must be finite or None, got {heading_deg}")
-    camera = camera or PanoramaCamera()
+    camera = camera or PanoramaCamera(height_m=world.camera_height_m)
     out = Path(out_dir)
     places = capture_places(world, spacing_m)
-    _prepare_folder(out, overwrite)
+    prepare_folder(out, overwrite)
     scene = build_scene(world_under(world, cond, seed))
     rng = np.random.default_rng([seed, 1])
     per_room: Counter[str] = Counter()

@@ -20,6 +20,8 @@ from robot.textures import TextureAtlas, build_atlas
 from robot.world import WALL_SIDES, Box, Material, Poster, Room, World
 
 POSTER_INSET_M = 0.005
+EMISSIVE_SHADE = 1.25  # brightness factor of light sources (windows): brighter than white, clips
+EMISSIVE_TEXTURES = frozenset({"window"})
 _LIGHT_DIR = np.array([0.35, 0.2, 0.91]) / np.linalg.norm([0.35, 0.2, 0.91])
 
 
@@ -55,7 +57,7 @@ class Scene:
     uv_origin_m: np.ndarray  # (K, 3)
     u_axis: np.ndarray  # (K, 3) unit vector
     v_axis: np.ndarray  # (K, 3) unit vector
-    shade: np.ndarray  # (K,) float32 brightness factor from a fixed light direction
+    shade: np.ndarray  # (K,) float32 brightness from a fixed light direction (windows: emissive)
     room_index: np.ndarray  # (K,) room the quad belongs to
     labels: tuple[str, ...]  # (K,) e.g. "lab/wall-x", "lab/desk1/top", "lab/poster3"
     room_names: tuple[str, ...]
@@ -203,6 +205,8 @@ def build_scene(world: World) -> Scene:
     normals = np.zeros((len(quads), 3))
     normals[np.arange(len(quads)), axis] = normal
     shade = 0.6 + 0.4 * np.clip(normals @ _LIGHT_DIR, 0.0, 1.0)
+    emissive = [q.material.texture in EMISSIVE_TEXTURES for q in quads]
+    shade[np.array(emissive, bool)] = EMISSIVE_SHADE
     return Scene(
         axis=axis,
         coord_m=np.array([q.coord_m for q in quads]),

@@ -12,8 +12,9 @@ adds: the camera is about 1 m high, so the robot does not fit under a table). A 
 last free position along its straight path (checked every ``PATH_STEP_M``) and reports ``bumped``.
 
 Captures are rendered like ``toploc dataset render`` renders map panoramas (same default
-:class:`~robot.render.PanoramaCamera`: 1024 x 192 px, square pixels, camera 1.0 m above the
-floor), at the true pose, under a capture condition, with a fresh sensor-noise seed per capture.
+:class:`~robot.render.PanoramaCamera`: 1024 x 192 px, square pixels, camera at the world's
+``camera_height_m`` above the floor), at the true pose, under a capture condition, with a fresh
+sensor-noise seed per capture.
 """
 
 from __future__ import annotations
@@ -214,7 +215,7 @@ class SimulatedRobot:
         self.condition = get_condition(condition) if isinstance(condition, str) else condition
         self.world = world_under(world, self.condition, seed)
         self.obstacles = Obstacles.of(self.world, radius_m)
-        self.camera = camera or PanoramaCamera()
+        self.camera = camera or PanoramaCamera(height_m=world.camera_height_m)
         self.noise = noise or MotionNoise()
         self.grey = grey
         self.seed = seed

@@ -1,4 +1,5 @@
-"""Surface textures for the rendered world: real photographs shipped with scikit-image.
+"""Surface textures for the rendered world: real photographs shipped with scikit-image, plain
+colours, and procedural paint, wood, tiles, windows and doors (:mod:`robot.procedural_textures`).
 
 Every texture is a square RGB tile of ``TEXTURE_SIZE_PX`` texels (photographs are centre-cropped
 to a square, then resized) with a mip-map pyramid of ``MIP_LEVELS`` levels, each half the size of
@@ -14,6 +15,8 @@ from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+
+from robot.procedural_textures import PROCEDURAL_TEXTURES, procedural_texture
 
 TEXTURE_SIZE_PX = 512
 MIP_LEVELS = 7
@@ -54,12 +57,12 @@ _PLAIN: dict[str, tuple[int, int, int]] = {
 
 PHOTO_TEXTURES: tuple[str, ...] = tuple(sorted(_PHOTOS))
 PLAIN_TEXTURES: tuple[str, ...] = tuple(sorted(_PLAIN))
-TEXTURE_NAMES: tuple[str, ...] = tuple(sorted((*_PHOTOS, *_PLAIN)))
+TEXTURE_NAMES: tuple[str, ...] = tuple(sorted((*_PHOTOS, *_PLAIN, *PROCEDURAL_TEXTURES)))
 
 
 def check_texture_name(name: str) -> None:
     """Raise ``ValueError`` naming ``name`` if it is not a known texture."""
-    if name not in _PHOTOS and name not in _PLAIN:
+    if name not in TEXTURE_NAMES:
         raise ValueError(f"unknown texture {name!r}; known textures: {', '.join(TEXTURE_NAMES)}")
 
 
@@ -67,6 +70,8 @@ def _load_rgb(name: str) -> np.ndarray:
     """The source picture of texture ``name`` as an (h, w, 3) uint8 RGB array."""
     if name in _PLAIN:
         return np.broadcast_to(np.array(_PLAIN[name], np.uint8), (8, 8, 3)).copy()
+    if name in PROCEDURAL_TEXTURES:
+        return procedural_texture(name, TEXTURE_SIZE_PX)
     import skimage.data  # imported lazily: it is slow to import and only needed here
 
     loader: Callable[[], np.ndarray] = getattr(skimage.data, _PHOTOS[name])

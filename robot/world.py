@@ -178,7 +178,8 @@ def shared_wall(a: Room, b: Room, tol_m: float = 1e-6) -> SharedWall | None:
 
 @dataclass(frozen=True)
 class World:
-    """Rooms joined by doors, with the default capture-place grid spacing and clearances."""
+    """Rooms joined by doors, with the default capture-place grid spacing and clearances, and
+    the default height of the robot's camera above the floor (metres)."""
 
     name: str
     rooms: tuple[Room, ...]
@@ -186,8 +187,11 @@ class World:
     place_spacing_m: float = 1.0
     wall_clearance_m: float = 0.5
     furniture_clearance_m: float = 0.3
+    camera_height_m: float = 1.0
 
     def __post_init__(self) -> None:
+        if not 0 < self.camera_height_m < min((r.height_m for r in self.rooms), default=1e9):
+            raise ValueError(f"world {self.name!r}: camera_height_m {self.camera_height_m} m")
         names = [r.name for r in self.rooms]
         if len(set(names)) != len(names) or not names:
             raise ValueError(f"world {self.name!r}: room names must be unique, got {names}")
@@ -242,8 +246,8 @@ def _overlap(a: Room, b: Room) -> bool:
     return min(ax1, bx1) - max(ax0, bx0) > 1e-6 and min(ay1, by1) - max(ay0, by0) > 1e-6
 
 
-def _grid(length_m: float, margin_m: float, spacing_m: float) -> np.ndarray:
-    """Centred grid coordinates in [margin, length - margin] with the given spacing."""
+def grid_coordinates_m(length_m: float, margin_m: float, spacing_m: float) -> np.ndarray:
+    """Centred grid coordinates in [margin, length - margin] with the given spacing (metres)."""
     usable = length_m - 2 * margin_m
     if usable < 0:
         return np.zeros(0)
@@ -263,8 +267,8 @@ def capture_places(world: World, spacing_m: float | None = None) -> tuple[Place,
         raise ValueError(f"spacing_m must be positive, got {spacing_m}")
     places: list[Place] = []
     for room in world.rooms:
-        xs = _grid(room.size_m[0], world.wall_clearance_m, spacing)
-        ys = _grid(room.size_m[1], world.wall_clearance_m, spacing)
+        xs = grid_coordinates_m(room.size_m[0], world.wall_clearance_m, spacing)
+        ys = grid_coordinates_m(room.size_m[1], world.wall_clearance_m, spacing)
         for y in ys:
             for x in xs:
                 if not _near_furniture(room, float(x), float(y), world.furniture_clearance_m):

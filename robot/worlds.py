@@ -1,4 +1,5 @@
-"""Named preset worlds, deterministic from a seed: ``lab``, ``square``, ``corridor``, ``building``.
+"""Named preset worlds, deterministic from a seed: ``lab``, ``square``, ``corridor``, ``building``,
+``house`` (bare painted rooms, :mod:`robot.house`).
 
 - ``square``: a small 4.0 x 3.4 m room with a table and a cabinet.
 - ``lab``: a large 10 x 11 m lab with rows of benches, shelves and two pillars.
@@ -18,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from robot.house import house_world
 from robot.world import WALL_SIDES, Box, Door, Material, Poster, Room, World
 
 WALL_TEXTURES = ("brick", "gravel", "moon", "coins", "text", "page", "grass")
@@ -224,6 +226,7 @@ WORLDS: dict[str, Callable[[int], World]] = {
     "square": square_world,
     "corridor": corridor_world,
     "building": building_world,
+    "house": house_world,
 }
 WORLD_NAMES: tuple[str, ...] = tuple(WORLDS)
 

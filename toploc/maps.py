@@ -75,7 +75,9 @@ def kidnapped_robot(
         places = map_db.places()
     if not places:
         raise ValueError(f"map {db_path} has no places")
-    camera = PanoramaCamera(places[0].image_width_px, places[0].image_height_px)
+    camera = PanoramaCamera(
+        places[0].image_width_px, places[0].image_height_px, height_m=world.camera_height_m
+    )
     noise = MotionNoise(motion_noise, motion_noise)
     return SimulatedRobot.kidnapped(
         world, room, seed=seed, condition=condition, camera=camera, noise=noise

@@ -4,11 +4,18 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import click
 
 from robot.conditions import CONDITIONS
 from robot.worlds import WORLD_NAMES
+
+if TYPE_CHECKING:
+    from robot.render import PanoramaCamera, Projection
+
+PHOTOS = "photos"
+PROJECTIONS = ("cylinder", "equirect")  # robot.render.PROJECTIONS, without importing OpenCV here
 
 
 @click.group("dataset")
@@ -21,23 +28,28 @@ def dataset() -> None:
 @click.option(
     "--world",
     "world_name",
-    type=click.Choice(WORLD_NAMES),
+    type=click.Choice((*WORLD_NAMES, PHOTOS)),
     required=True,
-    help="Preset world to render.",
+    help="Preset world to render; 'photos': real 360° photos projected onto box rooms.",
+)
+@click.option(
+    "--rooms",
+    default=None,
+    help="Photo rooms to render, comma-separated [default: all 17] (--world photos only).",
 )
 @click.option(
     "--spacing",
     "spacing_m",
     type=click.FloatRange(min=0, min_open=True),
     default=None,
-    help="Capture grid spacing in metres [default: the world's].",
+    help="Capture grid spacing in metres [default: the world's; photos 1.5].",
 )
 @click.option(
     "--condition",
     type=click.Choice(list(CONDITIONS)),
     default="default",
     show_default=True,
-    help="Lighting, noise and added objects.",
+    help="Lighting, noise and added objects (photos: lighting and noise only).",
 )
 @click.option(
     "--seed",
@@ -54,51 +66,95 @@ def dataset() -> None:
     help="Heading of every capture in its room's frame (CCW from +x).",
 )
 @click.option("--random-heading", is_flag=True, help="Seeded random headings instead.")
+@click.option(
+    "--projection",
+    type=click.Choice(PROJECTIONS),
+    default=None,
+    help="Panorama projection [default: cylinder; photos equirect].",
+)
 @click.option("--width", "width_px", type=click.IntRange(min=8), default=1024, show_default=True)
-@click.option("--height", "height_px", type=click.IntRange(min=1), default=192, show_default=True)
+@click.option(
+    "--height",
+    "height_px",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Image height [default: 192 for a cylinder, width/2 for equirect].",
+)
 @click.option(
     "--camera-height-m",
     type=click.FloatRange(min=0, min_open=True),
-    default=1.0,
-    show_default=True,
-    help="Camera height above the floor in metres.",
+    default=None,
+    help="Camera height above the floor in metres [default: the world's; photos 1.4].",
 )
 @click.option("--grey", is_flag=True, help="Write grey images instead of colour.")
 @click.option("--overwrite", is_flag=True, help="Replace the dataset in a non-empty OUT.")
 def render(
     out: Path,
     world_name: str,
+    rooms: str | None,
     spacing_m: float | None,
     condition: str,
     seed: int,
     heading_deg: float,
     random_heading: bool,
+    projection: str | None,
     width_px: int,
-    height_px: int,
-    camera_height_m: float,
+    height_px: int | None,
+    camera_height_m: float | None,
     grey: bool,
     overwrite: bool,
 ) -> None:
     """Render a panorama at every capture place of a preset world into the folder OUT."""
     from mapdb.dataset import read_manifest
-    from robot.dataset import render_dataset
-    from robot.render import PanoramaCamera
 
+    if rooms is not None and world_name != PHOTOS:
+        raise click.UsageError("--rooms applies to --world photos only")
     try:
-        manifest = render_dataset(
-            out,
-            world_name,
-            spacing_m=spacing_m,
-            condition=condition,
-            seed=seed,
-            heading_deg=None if random_heading else heading_deg,
-            camera=PanoramaCamera(width_px, height_px, height_m=camera_height_m),
-            grey=grey,
-            overwrite=overwrite,
-        )
+        camera = _camera(world_name, seed, projection, width_px, height_px, camera_height_m)
+        heading = None if random_heading else heading_deg
+        if world_name == PHOTOS:
+            from robot.photo_dataset import PHOTO_SPACING_M, render_photo_dataset
+
+            names = None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
+            spacing = PHOTO_SPACING_M if spacing_m is None else spacing_m
+            manifest = render_photo_dataset(
+                out, names, spacing, condition, seed, heading, camera, grey, overwrite
+            )
+        else:
+            from robot.dataset import render_dataset
+
+            manifest = render_dataset(
+                out, world_name, spacing_m, condition, seed, heading, camera, grey, overwrite
+            )
     except ValueError as error:
         raise click.ClickException(str(error)) from error
     rows = read_manifest(manifest.parent)
     click.echo(f"wrote {len(rows)} panoramas and {manifest}")
     for room, count in Counter(row.room for row in rows).items():
         click.echo(f"  {room}: {count} places")
+
+
+def _camera(
+    world_name: str,
+    seed: int,
+    projection: str | None,
+    width_px: int,
+    height_px: int | None,
+    camera_height_m: float | None,
+) -> PanoramaCamera:
+    """The camera of ``toploc dataset render``: options, else the world's defaults."""
+    from robot.photo_room import CAPTURE_HEIGHT_M
+    from robot.render import PanoramaCamera
+    from robot.worlds import make_world
+
+    if projection is None:
+        projection = "equirect" if world_name == PHOTOS else "cylinder"
+    if height_px is None:
+        height_px = width_px // 2 if projection == "equirect" else 192
+    if camera_height_m is None:
+        if world_name == PHOTOS:
+            camera_height_m = CAPTURE_HEIGHT_M
+        else:
+            camera_height_m = make_world(world_name, seed).camera_height_m
+    kind = cast("Projection", projection)
+    return PanoramaCamera(width_px, height_px, height_m=camera_height_m, projection=kind)
