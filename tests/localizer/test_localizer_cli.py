@@ -54,6 +54,8 @@ def test_eval_localize_on_a_dataset_writes_the_issue_keys(building_map, tmp_path
     assert score["unknown_room"]["n"] == 0
     for label in ("right, localized", "right, ambiguous", "wrong, localized", "lost"):
         assert label in result.output
+    assert sum(b["n"] for b in score["calibration"]["bins"]) == score["n"]
+    assert "Brier score of the top room" in result.output
 
 
 def test_eval_localize_counts_a_room_the_map_lacks(building_map, tmp_path):

@@ -138,6 +138,9 @@ def test_the_json_keeps_the_old_keys_and_adds_the_outcomes():
         "rooms": [],
     }
     assert record["per_room_outcomes"]["hall"]["rates"]["lost"] == pytest.approx(1 / 3)
+    bins = record["calibration"]["bins"]
+    assert [b["n"] for b in bins] == [0, 1, 0, 4, 0]  # lost at 0.5, the rest at 0.9
+    assert record["calibration"]["brier"] == pytest.approx((0.5**2 + 2 * 0.1**2 + 2 * 0.9**2) / 5)
 
 
 def test_the_report_leads_with_the_five_outcomes():

@@ -22,6 +22,7 @@ from toploc.evaluation.localization import (
     localize_leave_one_out,
 )
 from toploc.evaluation.localization_report import (
+    format_calibration,
     format_outcomes,
     format_per_room,
     format_timing,
@@ -55,7 +56,8 @@ def localize_command(
     Prints each query's outcome counted in five: right and localized, right but ambiguous,
     wrong and localized (confidently wrong), wrong and ambiguous, lost; top-1 room accuracy
     (a lost answer is never right), per true room, the rooms the map lacks (right only when
-    lost), the confusion matrix and the time per query. --json writes them (see README).
+    lost), the calibration of the stated probability, the confusion matrix and the time per
+    query. --json writes them (see README).
     """
     if (dataset is None) == (not leave_one_out):
         raise click.UsageError("give a DATASET or --leave-one-out (not both)")
@@ -68,7 +70,7 @@ def localize_command(
             run = localize_dataset(localizer, dataset, progress)
     score = run.score
     sections = [format_outcomes(score), format_per_room(score), format_unknown_rooms(score)]
-    sections += [format_confusion(score.confusion), format_timing(score)]
+    sections += [format_calibration(score), format_confusion(score.confusion), format_timing(score)]
     click.echo("\n".join(section for section in sections if section))
     if json_path is not None:
         json_path.write_text(json.dumps(score.to_json(), indent=2) + "\n")

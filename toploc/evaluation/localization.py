@@ -26,6 +26,7 @@ from localizer.belief import RoomBelief
 from localizer.localizer import Localizer, Observation
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import read_manifest
+from toploc.evaluation.calibration import Calibration, calibrate
 
 OUTCOMES = ("right_localized", "right_ambiguous", "wrong_localized", "wrong_ambiguous", "lost")
 """The five outcomes of a query; ``wrong_localized`` (confidently wrong) is the one that must
@@ -138,7 +139,9 @@ class LocalizationScore:
     and shares of :data:`OUTCOMES`. ``per_room``: per true room, ``{"n", "top1",
     "ambiguous_rate"}``; ``per_room_outcomes``: per true room, its :class:`RoomOutcomes`.
     ``confusion``: true room -> predicted room (or :data:`LOST_COLUMN`) -> count;
-    ``stage_ms_median``: per stage (extraction, retrieval, verification).
+    ``stage_ms_median``: per stage (extraction, retrieval, verification). ``calibration``: the
+    top room's stated probability against whether the answer was right (every query, lost
+    ones included and never right).
     """
 
     n: int
@@ -154,6 +157,7 @@ class LocalizationScore:
     answer_rate: float
     per_room_outcomes: dict[str, RoomOutcomes]
     unknown_room: UnknownRooms
+    calibration: Calibration
 
     @property
     def rates(self) -> dict[str, float]:
@@ -176,6 +180,7 @@ class LocalizationScore:
             "answer_rate": self.answer_rate,
             "per_room_outcomes": {r: o.to_json() for r, o in self.per_room_outcomes.items()},
             "unknown_room": self.unknown_room.to_json(),
+            "calibration": self.calibration.to_json(),
         }
 
 
@@ -189,18 +194,7 @@ def score_localization(
     outcomes = [outcome_of(q, map_rooms) for q in queries]
     counts = count_outcomes(outcomes)
     answered = len(queries) - counts["lost"]
-    true_rooms = sorted({q.true_room for q in queries})
-    per_room, per_room_outcomes = {}, {}
-    for room in true_rooms:
-        mine = [(q, o) for q, o in zip(queries, outcomes, strict=True) if q.true_room == room]
-        per_room[room] = {
-            "n": len(mine),
-            "top1": _share(is_right(o) for _, o in mine),
-            "ambiguous_rate": _share(q.state == "ambiguous" for q, _ in mine),
-        }
-        per_room_outcomes[room] = RoomOutcomes(
-            room in map_rooms, count_outcomes(o for _, o in mine)
-        )
+    per_room, per_room_outcomes = _per_room(queries, outcomes, map_rooms)
     totals = np.array([q.total_ms for q in queries])
     stages = sorted({stage for q in queries for stage in q.timing_ms})
     return LocalizationScore(
@@ -221,7 +215,28 @@ def score_localization(
         answer_rate=answered / len(queries),
         per_room_outcomes=per_room_outcomes,
         unknown_room=unknown_rooms(queries, map_rooms),
+        calibration=calibrate(
+            [q.top_probability for q in queries], [is_right(o) for o in outcomes]
+        ),
     )
+
+
+def _per_room(
+    queries: Sequence[QueryOutcome], outcomes: Sequence[str], map_rooms: Collection[str]
+) -> tuple[dict[str, dict[str, float]], dict[str, RoomOutcomes]]:
+    """Per true room: ``{"n", "top1", "ambiguous_rate"}`` and its :class:`RoomOutcomes`."""
+    per_room, per_room_outcomes = {}, {}
+    for room in sorted({q.true_room for q in queries}):
+        mine = [(q, o) for q, o in zip(queries, outcomes, strict=True) if q.true_room == room]
+        per_room[room] = {
+            "n": len(mine),
+            "top1": _share(is_right(o) for _, o in mine),
+            "ambiguous_rate": _share(q.state == "ambiguous" for q, _ in mine),
+        }
+        per_room_outcomes[room] = RoomOutcomes(
+            room in map_rooms, count_outcomes(o for _, o in mine)
+        )
+    return per_room, per_room_outcomes
 
 
 def confusion_matrix(queries: Sequence[QueryOutcome]) -> dict[str, dict[str, int]]:

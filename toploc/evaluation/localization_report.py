@@ -77,3 +77,15 @@ def format_timing(score: LocalizationScore) -> str:
         f"time per query: {score.ms_median:.0f} ms median / {score.ms_p95:.0f} ms p95 "
         f"({stages} ms median)"
     )
+
+
+def format_calibration(score: LocalizationScore) -> str:
+    """The reliability table (per bin of the top room's stated probability: n, mean stated,
+    fraction right) and the Brier score."""
+    lines = [f"  {'stated p':11s} {'n':>5s} {'mean stated':>12s} {'right':>7s}"]
+    for b in score.calibration.bins:
+        stated = "-" if b.mean_stated is None else f"{b.mean_stated:.3f}"
+        right = "-" if b.fraction_right is None else f"{b.fraction_right:.1%}"
+        lines.append(f"  {b.low:4.2f}-{b.high:<6.2f} {b.n:5d} {stated:>12s} {right:>7s}")
+    lines.append(f"  Brier score of the top room {score.calibration.brier:.3f} (0 is perfect)")
+    return "calibration (is the top room right as often as stated?)\n" + "\n".join(lines)
