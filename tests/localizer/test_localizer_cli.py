@@ -80,10 +80,22 @@ def test_eval_localize_counts_a_room_the_map_lacks(building_map, tmp_path):
     assert "rooms not in the map (attic)" in result.output
 
 
-def test_eval_localize_leave_one_out_needs_no_dataset(building_map):
-    result = run("eval", "localize", "--db", building_map[0], "--leave-one-out", "--no-progress")
+def test_eval_localize_leave_one_out_needs_no_dataset_and_plots(building_map, tmp_path):
+    plot = tmp_path / "calibration.png"
+    result = run(
+        "eval",
+        "localize",
+        "--db",
+        building_map[0],
+        "--leave-one-out",
+        "--no-progress",
+        "--plot",
+        plot,
+    )
     assert result.exit_code == 0, result.output
     assert "top-1 room" in result.output
+    assert plot.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    assert f"wrote {plot}" in result.output
 
 
 def test_eval_localize_wants_a_dataset_or_leave_one_out(building_map):

@@ -41,6 +41,13 @@ from toploc.evaluation.localization_report import (
     help="Query the map's own places, each against the map without it (no DATASET).",
 )
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Plot calibration (stated probability against how often right) and the outcomes (PNG).",
+)
 @click.option("--progress/--no-progress", default=True)
 def localize_command(
     dataset: Path | None,
@@ -49,6 +56,7 @@ def localize_command(
     index: bool | None,
     leave_one_out: bool,
     json_path: Path | None,
+    plot_path: Path | None,
     progress: bool,
 ) -> None:
     """Localize every panorama of DATASET (a folder with manifest.csv) against the map.
@@ -75,3 +83,9 @@ def localize_command(
     if json_path is not None:
         json_path.write_text(json.dumps(score.to_json(), indent=2) + "\n")
         click.echo(f"wrote {json_path}")
+    if plot_path is not None:
+        from toploc.evaluation.localization_plots import plot_localization  # matplotlib on demand
+
+        name = "leave-one-out" if dataset is None else dataset.name
+        plot_localization(score.calibration, score.outcomes, plot_path, title=name)
+        click.echo(f"wrote {plot_path}")
