@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 from click.testing import CliRunner
 
@@ -48,12 +49,53 @@ def test_eval_localize_on_a_dataset_writes_the_issue_keys(building_map, tmp_path
     assert score["n"] == sum(1 for _ in (dataset / "manifest.csv").open()) - 1
     assert score["top1"] >= 0.9  # the map's own images, same condition
     assert set(score["confusion"]) == set(score["per_room"])
+    assert sum(score["outcomes"].values()) == score["n"]
+    assert score["outcomes"]["wrong_localized"] == 0
+    assert score["unknown_room"]["n"] == 0
+    for label in ("right, localized", "right, ambiguous", "wrong, localized", "lost"):
+        assert label in result.output
+    assert sum(b["n"] for b in score["calibration"]["bins"]) == score["n"]
+    assert "Brier score of the top room" in result.output
 
 
-def test_eval_localize_leave_one_out_needs_no_dataset(building_map):
-    result = run("eval", "localize", "--db", building_map[0], "--leave-one-out", "--no-progress")
+def test_eval_localize_counts_a_room_the_map_lacks(building_map, tmp_path):
+    db_path, dataset = building_map
+    queries = tmp_path / "queries"
+    (queries / "images").mkdir(parents=True)
+    shutil.copy(dataset / "images" / "kitchen_003.png", queries / "images" / "attic_000.png")
+    shutil.copy(dataset / "images" / "kitchen_000.png", queries / "images" / "kitchen_000.png")
+    (queries / "manifest.csv").write_text(
+        "image,room,x_m,y_m,heading_deg\n"
+        "images/attic_000.png,attic,,,\n"
+        "images/kitchen_000.png,kitchen,,,\n"
+    )
+    out = tmp_path / "score.json"
+    result = run("eval", "localize", queries, "--db", db_path, "--json", out, "--no-progress")
+    assert result.exit_code == 0, result.output
+    score = json.loads(out.read_text())
+    unknown = score["unknown_room"]
+    assert (unknown["n"], unknown["rooms"]) == (1, ["attic"])
+    assert score["per_room"]["attic"]["top1"] == 0.0  # a kitchen view cannot be the attic
+    assert score["per_room_outcomes"]["attic"]["in_map"] is False
+    assert "rooms not in the map (attic)" in result.output
+
+
+def test_eval_localize_leave_one_out_needs_no_dataset_and_plots(building_map, tmp_path):
+    plot = tmp_path / "calibration.png"
+    result = run(
+        "eval",
+        "localize",
+        "--db",
+        building_map[0],
+        "--leave-one-out",
+        "--no-progress",
+        "--plot",
+        plot,
+    )
     assert result.exit_code == 0, result.output
     assert "top-1 room" in result.output
+    assert plot.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    assert f"wrote {plot}" in result.output
 
 
 def test_eval_localize_wants_a_dataset_or_leave_one_out(building_map):

@@ -21,6 +21,13 @@ from toploc.evaluation.localization import (
     localize_dataset,
     localize_leave_one_out,
 )
+from toploc.evaluation.localization_report import (
+    format_calibration,
+    format_outcomes,
+    format_per_room,
+    format_timing,
+    format_unknown_rooms,
+)
 
 
 @click.command("localize")
@@ -34,6 +41,13 @@ from toploc.evaluation.localization import (
     help="Query the map's own places, each against the map without it (no DATASET).",
 )
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Plot calibration (stated probability against how often right) and the outcomes (PNG).",
+)
 @click.option("--progress/--no-progress", default=True)
 def localize_command(
     dataset: Path | None,
@@ -42,12 +56,16 @@ def localize_command(
     index: bool | None,
     leave_one_out: bool,
     json_path: Path | None,
+    plot_path: Path | None,
     progress: bool,
 ) -> None:
     """Localize every panorama of DATASET (a folder with manifest.csv) against the map.
 
-    Prints top-1 room accuracy, the share marked ambiguous, the confusion matrix and the time
-    per query; --json writes n, top1, ambiguous_rate, per_room, confusion, ms_median, ms_p95.
+    Prints each query's outcome counted in five: right and localized, right but ambiguous,
+    wrong and localized (confidently wrong), wrong and ambiguous, lost; top-1 room accuracy
+    (a lost answer is never right), per true room, the rooms the map lacks (right only when
+    lost), the calibration of the stated probability, the confusion matrix and the time per
+    query. --json writes them (see README).
     """
     if (dataset is None) == (not leave_one_out):
         raise click.UsageError("give a DATASET or --leave-one-out (not both)")
@@ -59,17 +77,15 @@ def localize_command(
             assert dataset is not None
             run = localize_dataset(localizer, dataset, progress)
     score = run.score
-    click.echo(
-        f"n {score.n}: top-1 room {score.top1:.1%}, ambiguous {score.ambiguous_rate:.1%}, "
-        f"{score.ms_median:.0f} ms median / {score.ms_p95:.0f} ms p95 per query "
-        f"({', '.join(f'{k} {v:.0f}' for k, v in score.stage_ms_median.items())} ms median)"
-    )
-    for room, row in score.per_room.items():
-        click.echo(
-            f"  {room:14s} n {row['n']:3.0f}  top-1 {row['top1']:6.1%}  "
-            f"ambiguous {row['ambiguous_rate']:6.1%}"
-        )
-    click.echo(format_confusion(score.confusion))
+    sections = [format_outcomes(score), format_per_room(score), format_unknown_rooms(score)]
+    sections += [format_calibration(score), format_confusion(score.confusion), format_timing(score)]
+    click.echo("\n".join(section for section in sections if section))
     if json_path is not None:
         json_path.write_text(json.dumps(score.to_json(), indent=2) + "\n")
         click.echo(f"wrote {json_path}")
+    if plot_path is not None:
+        from toploc.evaluation.localization_plots import plot_localization  # matplotlib on demand
+
+        name = "leave-one-out" if dataset is None else dataset.name
+        plot_localization(score.calibration, score.outcomes, plot_path, title=name)
+        click.echo(f"wrote {plot_path}")
