@@ -26,7 +26,7 @@ from localizer.belief import RoomBelief
 from localizer.localizer import Localizer, Observation
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import read_manifest
-from toploc.evaluation.calibration import Calibration, calibrate
+from toploc.evaluation.reliability import Reliability, reliability
 
 OUTCOMES = ("right_localized", "right_ambiguous", "wrong_localized", "wrong_ambiguous", "lost")
 """The five outcomes of a query; ``wrong_localized`` (confidently wrong) is the one that must
@@ -157,7 +157,7 @@ class LocalizationScore:
     answer_rate: float
     per_room_outcomes: dict[str, RoomOutcomes]
     unknown_room: UnknownRooms
-    calibration: Calibration
+    calibration: Reliability
 
     @property
     def rates(self) -> dict[str, float]:
@@ -215,7 +215,7 @@ def score_localization(
         answer_rate=answered / len(queries),
         per_room_outcomes=per_room_outcomes,
         unknown_room=unknown_rooms(queries, map_rooms),
-        calibration=calibrate(
+        calibration=reliability(
             [q.top_probability for q in queries], [is_right(o) for o in outcomes]
         ),
     )

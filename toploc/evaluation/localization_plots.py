@@ -11,7 +11,7 @@ import matplotlib
 matplotlib.use("Agg")  # files only: toploc runs headless on robots and CI
 import matplotlib.pyplot as plt
 
-from toploc.evaluation.calibration import Calibration
+from toploc.evaluation.reliability import Reliability
 
 OUTCOME_COLOURS = {
     "right_localized": "tab:green",
@@ -24,7 +24,7 @@ OUTCOME_COLOURS = {
 
 
 def plot_localization(
-    calibration: Calibration, outcomes: Mapping[str, int], path: Path, title: str = ""
+    calibration: Reliability, outcomes: Mapping[str, int], path: Path, title: str = ""
 ) -> Path:
     """Write a PNG: left, each bin's fraction right against its mean stated probability (0..1)
     with the diagonal of perfect calibration, the bin edges and each bin's count; right, the

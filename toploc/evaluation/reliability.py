@@ -1,4 +1,4 @@
-"""Calibration of stated probabilities: does a room stated at p turn out right a fraction p
+"""Reliability of stated probabilities: does a room stated at p turn out right a fraction p
 of the time? A reliability table over bins of stated probability, and the Brier score.
 
 Pure numpy: stated probabilities (0..1) and whether each answer was right in, numbers out.
@@ -38,7 +38,7 @@ class ReliabilityBin:
 
 
 @dataclass(frozen=True)
-class Calibration:
+class Reliability:
     """The reliability table and the Brier score (mean squared gap between stated probability
     and 1 if right else 0: 0 is perfect, 0.25 is always stating 0.5)."""
 
@@ -92,6 +92,6 @@ def reliability_bins(
     return tuple(bins)
 
 
-def calibrate(stated: Sequence[float], right: Sequence[bool]) -> Calibration:
+def reliability(stated: Sequence[float], right: Sequence[bool]) -> Reliability:
     """The reliability table over :data:`RELIABILITY_EDGES` and the Brier score."""
-    return Calibration(reliability_bins(stated, right), brier_score(stated, right))
+    return Reliability(reliability_bins(stated, right), brier_score(stated, right))

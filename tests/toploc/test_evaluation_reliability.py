@@ -1,17 +1,17 @@
-"""Calibration of the stated top-room probability: reliability bins and the Brier score."""
+"""Reliability of the stated top-room probability: reliability bins and the Brier score."""
 
 import itertools
 
 import numpy as np
 import pytest
 
-from toploc.evaluation.calibration import (
+from toploc.evaluation.localization import QueryOutcome, score_localization
+from toploc.evaluation.reliability import (
     RELIABILITY_EDGES,
     brier_score,
-    calibrate,
+    reliability,
     reliability_bins,
 )
-from toploc.evaluation.localization import QueryOutcome, score_localization
 
 STATED = [0.2, 0.6, 0.6, 0.8, 0.95, 0.995, 1.0, 0.5, 0.99]
 RIGHT = [False, True, False, True, True, True, True, False, True]
@@ -36,7 +36,7 @@ def test_an_empty_bin_has_no_mean():
 def test_brier_score_by_hand():
     gaps = [0.2, 0.4, 0.6, 0.2, 0.05, 0.005, 0.0, 0.5, 0.01]
     assert brier_score(STATED, RIGHT) == pytest.approx(np.mean(np.square(gaps)))
-    assert calibrate(STATED, RIGHT).brier == brier_score(STATED, RIGHT)
+    assert reliability(STATED, RIGHT).brier == brier_score(STATED, RIGHT)
 
 
 def test_the_bins_agree_with_a_plain_loop():
