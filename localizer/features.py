@@ -78,6 +78,10 @@ class ExtractionParams:
     ``max_keypoints``: keep at most this many after filtering (None: no limit).
     ``wrap_margin_px``: columns of circular padding on each side for the 360° wrap-around.
     ``sift_*`` / ``mser_*``: the OpenCV detector parameters.
+    ``upright``: describe every keypoint at orientation 0 (the camera does not roll, so the
+    dominant-gradient rotation only adds ambiguity). ``descriptor``: ``"sift"``, or
+    ``"rootsift"`` (Arandjelović & Zisserman 2012: L1-normalised, square-rooted, so the L2
+    distance between descriptors is the Hellinger distance).
     """
 
     detector: str = "sift"
@@ -96,6 +100,8 @@ class ExtractionParams:
     sift_edge_threshold: float = 10.0
     sift_sigma: float = 1.6
     sift_precise_upscale: bool = True
+    upright: bool = False
+    descriptor: str = "sift"
     mser_delta: int = 5
     mser_min_area: int = 30
     mser_max_area: int = 14400
@@ -106,6 +112,8 @@ class ExtractionParams:
             raise ValueError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
         if self.rows not in ROWS_SELECTIONS:
             raise ValueError(f"rows must be one of {ROWS_SELECTIONS}, got {self.rows!r}")
+        if self.descriptor not in ("sift", "rootsift"):
+            raise ValueError(f"descriptor must be sift or rootsift, got {self.descriptor!r}")
         if self.camera not in ("cylinder", "equirect"):
             raise ValueError(f"camera must be cylinder or equirect, got {self.camera!r}")
         if self.max_width_px is not None and self.max_width_px < 8:
@@ -238,14 +246,38 @@ def _detect(
     """Keypoints and SIFT descriptors (``None`` without keypoints) on the padded image for the
     chosen detector."""
     sift = _sift(params)
-    if params.detector == "sift":
+    if params.detector == "sift" and params.upright:
+        keypoints, descriptors = sift.compute(padded, _upright(sift.detect(padded, None)))
+    elif params.detector == "sift":
         keypoints, descriptors = sift.detectAndCompute(padded, None)
     else:
         mser_keypoints = _mser_keypoints(padded, params)
         if not mser_keypoints:
             return [], None
         keypoints, descriptors = sift.compute(padded, mser_keypoints)
-    return keypoints, None if descriptors is None else np.asarray(descriptors)
+    if descriptors is None:
+        return keypoints, None
+    values = np.asarray(descriptors, dtype=np.float32)
+    return keypoints, _root(values) if params.descriptor == "rootsift" else values
+
+
+def _upright(keypoints: Sequence[cv2.KeyPoint]) -> list[cv2.KeyPoint]:
+    """The keypoints at orientation 0, once each: SIFT repeats a location once per dominant
+    orientation, which become duplicates when the orientation is dropped."""
+    seen: set[tuple[float, float, float]] = set()
+    upright = []
+    for kp in keypoints:
+        key = (round(kp.pt[0], 2), round(kp.pt[1], 2), round(kp.size, 2))
+        if key not in seen:
+            seen.add(key)
+            upright.append(cv2.KeyPoint(kp.pt[0], kp.pt[1], kp.size, 0.0, kp.response, kp.octave))
+    return upright
+
+
+def _root(descriptors: np.ndarray) -> np.ndarray:
+    """RootSIFT: each row L1-normalised and square-rooted (unit L2 norm)."""
+    total = np.abs(descriptors).sum(axis=1, keepdims=True)
+    return np.sqrt(descriptors / np.maximum(total, 1e-12)).astype(np.float32)
 
 
 def _seam_duplicates(

@@ -98,11 +98,12 @@ class RatioLikelihood:
     of the counts; empty for the defaults), for ``toploc map info`` and the README.
 
     The defaults (used for a map that cannot be calibrated: fewer than two places in every room)
-    are the fit on the rendered ``building`` map (103 places, 1.3 m apart), see the README.
+    are the fit on the bare rendered ``house`` (35 equirectangular places 1.5 m apart: -6.9,
+    2.47, 0, lost below 17), with ``min_inliers`` lowered to 12 for rooms barer still.
     """
 
-    intercept: float = -8.0
-    slope: float = 1.9
+    intercept: float = -6.9
+    slope: float = 2.5
     per_inlier: float = 0.0
     min_inliers: int = 12
     max_log_ratio: float = 25.0
@@ -173,12 +174,15 @@ class CalibrationSamples:
     other places (``same_room``, only for rooms with two or more places), every other room's best
     count (``other_room``), and the largest of those per query (``max_other``).
 
-    A room that explains a query at least as well as the query's own room (and the own room did
-    match, ``own >= lookalike_min_inliers``) is a look-alike of it (the two offices of the
-    ``building`` world): its count is what the query's own room gives, not chance, so it is
-    counted in ``n_lookalike`` and left out of ``other_room`` and ``max_other``. Look-alike rooms
-    cannot be told apart by one view anyway; both get a high likelihood and the belief stays
-    ambiguous until the robot drives to a telling place.
+    A room that explains a query nearly as well as the query's own room, or better (at least
+    ``lookalike_fraction`` of the own room's count and at least ``lookalike_min_inliers``), is a
+    look-alike of it for that view: the twin bedrooms of the ``house`` world, or the living room
+    seen through the hall's open door. Its count is what a same-room view gives, not chance:
+    it is counted in ``n_lookalike``, left out of ``other_room`` and ``max_other``, and stands
+    for the own room when it is higher (leaving a place out leaves its twin's identical view in
+    the map, while the own room's nearest view is a whole place spacing away). Look-alike rooms
+    cannot be told apart by that view; both get a high likelihood and the belief stays ambiguous
+    until the robot drives to a telling place.
     """
 
     same_room: np.ndarray
@@ -192,6 +196,7 @@ class CalibrationSamples:
         queries: Iterable[tuple[str, Mapping[str, float]]],
         room_sizes: Mapping[str, int],
         lookalike_min_inliers: float = 20.0,
+        lookalike_fraction: float = 0.8,
     ) -> CalibrationSamples:
         """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
         per room) says whether the query's room had another place to match."""
@@ -203,11 +208,13 @@ class CalibrationSamples:
             own = float(best.get(own_room, 0.0))
             has_own = room_sizes.get(own_room, 0) >= 2
             others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
-            if has_own and own >= lookalike_min_inliers:
-                kept = [count for count in others if count < own]
-                n_lookalike += len(others) - len(kept)
-                others = kept
-            if has_own:
+            bar = max(lookalike_min_inliers, lookalike_fraction * own)
+            lookalikes = [count for count in others if count >= bar]
+            if lookalikes:
+                n_lookalike += len(lookalikes)
+                others = [count for count in others if count < bar]
+                own = max(own, *lookalikes)
+            if has_own or lookalikes:
                 same.append(own)
             other += others
             if others:

@@ -385,7 +385,8 @@ class MapDatabase:
             file_size_bytes=self.file_size_bytes(),
             rooms=self.rooms(),
             edges=self.edges(),
-            fingerprints_per_detector=self.fingerprint_counts(),
+            fingerprints_per_detector=(counts := self.fingerprint_counts()),
+            likelihoods={d: model for d in counts if (model := self.likelihood(d)) is not None},
         )
 
 

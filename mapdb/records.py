@@ -83,6 +83,7 @@ class MapInfo:
     rooms: list[RoomSummary]
     edges: list[tuple[str, str]]
     fingerprints_per_detector: dict[str, int] = field(default_factory=dict)
+    likelihoods: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def n_places(self) -> int:
@@ -208,6 +209,46 @@ class FingerprintTable:
             raise ValueError(
                 f"image_sizes_px must have shape ({m}, 2), got {np.shape(self.image_sizes_px)}"
             )
+
+    @classmethod
+    def stack(
+        cls,
+        detector: str,
+        place_ids: Sequence[int],
+        rooms: Sequence[str],
+        fingerprints: Sequence[Fingerprint],
+        alv_xy: np.ndarray | None = None,
+    ) -> FingerprintTable:
+        """The table of ``fingerprints`` (one per place, all of ``detector``), in that order;
+        ``alv_xy`` (m, 2) defaults to zeros. Built in memory, e.g. for an experiment."""
+        if not len(place_ids) == len(rooms) == len(fingerprints):
+            raise ValueError(
+                f"{len(place_ids)} place ids, {len(rooms)} rooms and {len(fingerprints)} "
+                f"fingerprints must match"
+            )
+        if any(fp.detector != detector for fp in fingerprints):
+            raise ValueError(f"every fingerprint must be of detector {detector!r}")
+        offsets = np.zeros(len(fingerprints) + 1, dtype=np.int64)
+        np.cumsum([fp.n for fp in fingerprints], out=offsets[1:])
+        dim = fingerprints[0].descriptors.shape[1] if fingerprints else 128
+        return cls(
+            detector=detector,
+            place_ids=np.asarray(place_ids, dtype=np.int64),
+            rooms=tuple(rooms),
+            offsets=offsets,
+            keypoints_xy=np.concatenate(
+                [fp.keypoints_xy for fp in fingerprints] or [np.zeros((0, 2))]
+            ).astype(np.float32),
+            bearings_rad=np.concatenate([fp.bearings_rad for fp in fingerprints] or [np.zeros(0)]),
+            descriptors=np.concatenate(
+                [fp.descriptors for fp in fingerprints] or [np.zeros((0, dim))]
+            ).astype(np.float32),
+            alv_xy=np.zeros((len(fingerprints), 2)) if alv_xy is None else np.asarray(alv_xy),
+            image_sizes_px=np.array(
+                [(fp.image_width_px, fp.image_height_px) for fp in fingerprints], dtype=np.int64
+            ).reshape(-1, 2),
+            params=tuple(fp.params for fp in fingerprints),
+        )
 
     @property
     def keypoint_place_index(self) -> np.ndarray:

@@ -19,6 +19,7 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     from robot.dataset import render_dataset
     from robot.render import PanoramaCamera
     from toploc.extraction import resolve_extractor
+    from toploc.maps import calibrate_map
 
     root = tmp_path_factory.mktemp("building")
     dataset = root / "dataset"
@@ -30,4 +31,5 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
             map_db, read_manifest(dataset), resolve_extractor(("sift",)), workers=0, progress=False
         )
         connect_known_rooms(map_db, read_edges(dataset))
+    calibrate_map(db_path, "sift")  # as `toploc map build` does
     return db_path, dataset

@@ -116,3 +116,42 @@ def test_sim_kidnap_reports_each_trial_and_the_totals(building_map, tmp_path):
     assert {"final_belief", "steps", "distance_m", "frames", "success"} <= set(trial)
     assert report["totals"]["trials"] == 1
     assert report["totals"]["success_rate"] == float(trial["success"])
+
+
+def test_map_calibrate_stores_the_likelihood_that_map_info_shows(building_map, tmp_path):
+    db_path = tmp_path / "map.db"
+    shutil.copy(building_map[0], db_path)
+    result = run("map", "calibrate", "--db", db_path, "--no-progress")
+    assert result.exit_code == 0, result.output
+    assert "sift likelihood log ratio" in result.output
+    info = run("map", "info", "--db", db_path, "--json")
+    likelihood = json.loads(info.output)["likelihoods"]["sift"]
+    assert likelihood["model"] == "ratio" and likelihood["fit"]["n_same_room"] > 0
+
+
+def test_a_bad_camera_is_refused_by_name(building_map):
+    image = building_map[1] / "images" / "kitchen_000.png"
+    result = run("localize", image, "--db", building_map[0], "--camera", "fisheye")
+    assert result.exit_code == 2
+    assert "camera 'fisheye'" in result.output
+
+
+def test_an_equirectangular_panorama_localizes_against_a_cylinder_map(building_map, tmp_path):
+    import cv2
+    import numpy as np
+
+    from robot.render import PanoramaCamera, render_panorama
+    from robot.scene import build_scene
+    from robot.world import Pose2D
+    from robot.worlds import make_world
+
+    world = make_world("building")
+    camera = PanoramaCamera(1024, 512, projection="equirect")
+    kitchen = world.room("kitchen")
+    pose = Pose2D(kitchen.origin_m[0] + 1.7, kitchen.origin_m[1] + 1.4, 0.6)
+    image = render_panorama(build_scene(world), pose, camera)
+    path = tmp_path / "sphere.png"
+    cv2.imwrite(str(path), np.ascontiguousarray(image[..., ::-1]))
+    result = run("localize", path, "--db", building_map[0], "--json")
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["top"]["room"] == "kitchen"

@@ -202,9 +202,14 @@ def add_command(
 
 @map_group.command("calibrate")
 @db_option
-@detector_option
+@click.option(
+    "--detector",
+    "detectors",
+    default=None,
+    help="Comma-separated detectors to calibrate [default: every detector the map holds].",
+)
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
-def calibrate_command(db_path: Path, detectors: str, progress: bool) -> None:
+def calibrate_command(db_path: Path, detectors: str | None, progress: bool) -> None:
     """Fit the likelihood of each detector's evidence on the map's own places and store it.
 
     Each of up to 60 places, spread over the rooms, is localized against the map without it;
@@ -212,6 +217,14 @@ def calibrate_command(db_path: Path, detectors: str, progress: bool) -> None:
     `map build` and `map add` do this themselves unless --no-calibrate is given.
     """
     with _map_errors():
+        if detectors is None:
+            if not db_path.is_file():
+                raise click.ClickException(f"map database {db_path} does not exist")
+            with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+                held = sorted(map_db.info().fingerprints_per_detector)
+            if not held:
+                raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
+            detectors = ",".join(held)
         _calibrate(db_path, parse_detectors(detectors), progress)
 
 
@@ -268,7 +281,14 @@ def _format_info(info: MapInfo) -> str:
         + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
         f"edges ({len(info.edges)}):",
         *(f"  {a} <-> {b}" for a, b in info.edges),
+        "likelihood:",
+        *(
+            f"  {detector}: {describe_likelihood(RatioLikelihood.from_json(model))}"
+            for detector, model in info.likelihoods.items()
+        ),
     ]
+    if not info.likelihoods:
+        lines[-1] += " not calibrated (toploc map calibrate)"
     return "\n".join(lines)
 
 
