@@ -49,6 +49,10 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     "min6": ({}, {"min_matches": 6}),
     "ratio09": ({}, {"ratio": 0.9}),
     "width2048": ({"max_width_px": 2048}, {}),
+    "planar": ({}, {"motion": "planar"}),
+    "planar-min6": ({}, {"motion": "planar", "min_matches": 6}),
+    "planar-c02": ({"sift_contrast_threshold": 0.02}, {"motion": "planar"}),
+    "planar-up-root": ({"upright": True, "descriptor": "rootsift"}, {"motion": "planar"}),
 }
 
 

@@ -25,6 +25,8 @@ from localizer.retrieval import PlaceIndex
 from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, verify
 from mapdb.records import Fingerprint, FingerprintTable
 
+MOTIONS: tuple[str, ...] = ("auto", "general", "planar")
+
 
 @dataclass(frozen=True)
 class EvidenceParams:
@@ -33,7 +35,10 @@ class EvidenceParams:
     ``ratio``: Lowe's ratio for descriptor matching. ``min_matches``: places with fewer matches
     get 0 inliers without RANSAC. ``max_error_rad``: RANSAC inlier threshold (tangent Sampson
     error, rad). ``shortlist``: how many places an index hands to verification. ``seed``:
-    RANSAC's seed. ``max_trials``: RANSAC's iteration cap per place.
+    RANSAC's seed. ``max_trials``: RANSAC's iteration cap per place. ``motion``: the relative
+    pose model, ``"general"`` or ``"planar"`` (:class:`~localizer.verification.VerificationParams`),
+    or ``"auto"``: the one the map's calibration chose (:mod:`localizer.calibration`), general
+    for a map without one.
     """
 
     ratio: float = DEFAULT_RATIO
@@ -42,6 +47,7 @@ class EvidenceParams:
     shortlist: int = 10
     seed: int = 0
     max_trials: int = 1000
+    motion: str = "auto"
 
     def __post_init__(self) -> None:
         if not 0 < self.ratio <= 1:
@@ -50,6 +56,8 @@ class EvidenceParams:
             raise ValueError(
                 f"min_matches must be >= {MIN_CORRESPONDENCES}, got {self.min_matches!r}"
             )
+        if self.motion not in MOTIONS:
+            raise ValueError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
         if self.shortlist < 1:
             raise ValueError(f"shortlist must be >= 1, got {self.shortlist!r}")
         self.verification()  # validates max_error_rad, seed and max_trials
@@ -62,6 +70,7 @@ class EvidenceParams:
             seed=self.seed,
             min_trials=min(100, self.max_trials),
             max_trials=self.max_trials,
+            motion="general" if self.motion == "auto" else self.motion,
         )
 
 

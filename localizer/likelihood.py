@@ -93,20 +93,28 @@ class RatioLikelihood:
 
     ``intercept``, ``slope``, ``per_inlier``: the log density ratio
     ``intercept + slope * log(1 + n) + per_inlier * n``.
+    ``motion``: the relative-pose model the counts were verified with (``general`` or
+    ``planar``; the calibration picks the one that separates the map's rooms better).
     ``min_inliers``: below this best count the frame is flat and ``lost``. ``max_log_ratio``:
     the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
     of the counts; empty for the defaults), for ``toploc map info`` and the README.
 
-    The defaults (used for a map that cannot be calibrated: fewer than two places in every room)
-    are the fit on the bare rendered ``house`` (35 equirectangular places 1.5 m apart: -6.9,
-    2.47, 0, lost below 17), with ``min_inliers`` lowered to 12 for rooms barer still.
+    The defaults (used for a map that cannot be calibrated: fewer than two places in every room,
+    and the prior the fit is pulled towards) are the fit on the bare rendered ``house`` (35
+    equirectangular places 1.5 m apart), with ``min_inliers`` lowered to 12 for rooms barer
+    still, and ``per_inlier = 1/15``: where two rooms both match strongly (look-alike rooms,
+    whose difference lies in what the door shows), 15 more inliers multiply the odds by e. The
+    leave-one-out cannot measure this term (it sets look-alikes apart), so the prior carries it;
+    on the synthetic look-alike offices of ``tests/localizer/test_localizer_policy.py`` this
+    temperature ended 1.7 % of 400 episodes in the wrong office (0.7 % at 20, 7.8 % at 10).
     """
 
     intercept: float = -6.9
     slope: float = 2.5
-    per_inlier: float = 0.0
+    per_inlier: float = 1.0 / 15.0
     min_inliers: int = 12
     max_log_ratio: float = 25.0
+    motion: str = "general"
     fit: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -118,6 +126,8 @@ class RatioLikelihood:
             )
         if self.min_inliers < 0:
             raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
+        if self.motion not in ("general", "planar"):
+            raise ValueError(f"motion must be general or planar, got {self.motion!r}")
         if not self.max_log_ratio > 0:
             raise ValueError(f"max_log_ratio must be positive, got {self.max_log_ratio}")
 
@@ -144,6 +154,7 @@ class RatioLikelihood:
             "per_inlier": self.per_inlier,
             "min_inliers": self.min_inliers,
             "max_log_ratio": self.max_log_ratio,
+            "motion": self.motion,
             "fit": dict(self.fit),
         }
 
@@ -162,6 +173,7 @@ class RatioLikelihood:
                 per_inlier=float(data.get("per_inlier", 0.0)),
                 min_inliers=int(data["min_inliers"]),
                 max_log_ratio=float(data["max_log_ratio"]),
+                motion=str(data.get("motion", "general")),
                 fit={str(k): float(v) for k, v in dict(data.get("fit", {})).items()},
             )
         except (KeyError, TypeError, ValueError) as error:

@@ -155,6 +155,8 @@ class Localizer:
         self.likelihood: Likelihood = (
             self.config.likelihood or loaded.likelihood or RatioLikelihood()
         )
+        calibrated = self.likelihood if isinstance(self.likelihood, RatioLikelihood) else None
+        self.evidence_params = _resolved(self.config.evidence, calibrated)
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read
@@ -176,7 +178,7 @@ class Localizer:
         evidence = place_evidence(
             fingerprint,
             self.map.table,
-            self.config.evidence,
+            self.evidence_params,
             self.map.index,
             exclude=exclude,
             table_rays=self.map.rays,
@@ -246,7 +248,15 @@ class Localizer:
                 self.map.table,
                 self.map.rays,
                 self.map.table_index(reference_id),
-                self.config.evidence,
+                self.evidence_params,
             )
             self._similarity[key] = evidence.inliers
         return self._similarity[key]
+
+
+def _resolved(params: EvidenceParams, calibrated: RatioLikelihood | None) -> EvidenceParams:
+    """``params`` with ``motion`` ``"auto"`` replaced by the calibrated likelihood's choice
+    (general without one)."""
+    if params.motion != "auto":
+        return params
+    return replace(params, motion="general" if calibrated is None else calibrated.motion)

@@ -38,6 +38,7 @@ import numpy as np
 import pycolmap
 
 from homing.bearings import wrap_angle_rad
+from localizer.planar import estimate_planar_pose
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
 
@@ -50,9 +51,14 @@ class VerificationParams:
     1024-px panorama is 0.0061 rad). ``min_correspondences``: fewer pairs give 0 inliers without
     running RANSAC (at least 5). ``seed``: RANSAC's random seed (deterministic results).
     ``min_trials``/``max_trials``/``confidence``: pycolmap's RANSAC stopping rule.
+    ``motion``: ``"general"`` (pycolmap's 5-point essential matrix: any relative pose) or
+    ``"planar"`` (:mod:`localizer.planar`: a yaw and a horizontal translation, for a camera
+    that moves on the floor without tilting; ``planar_trials`` 2-pair samples).
     """
 
     max_error_rad: float = 0.01
+    motion: str = "general"
+    planar_trials: int = 300
     min_correspondences: int = 8
     seed: int = 0
     min_trials: int = 100
@@ -73,6 +79,10 @@ class VerificationParams:
             )
         if not 0 < self.confidence < 1:
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
+        if self.motion not in ("general", "planar"):
+            raise ValueError(f"motion must be general or planar, got {self.motion!r}")
+        if self.planar_trials < 1:
+            raise ValueError(f"planar_trials must be >= 1, got {self.planar_trials}")
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0 (pycolmap treats -1 as random), got {self.seed}")
 
@@ -201,6 +211,23 @@ def triangulated_depths(
     return d_place, d_query
 
 
+def _relative_pose(
+    x_place: np.ndarray, x_query: np.ndarray, params: VerificationParams
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(R_query_from_place, t)`` by the configured solver, or None."""
+    if params.motion == "planar":
+        planar = estimate_planar_pose(
+            x_place, x_query, params.max_error_rad, params.seed, params.planar_trials
+        )
+        return None if planar is None else (planar.rotation, planar.translation)
+    result = pycolmap.estimate_relative_pose(x_place, x_query, params.ransac_options())
+    if result is None:
+        return None
+    pose = result["cam2_from_cam1"]
+    rotation = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+    return rotation, np.asarray(pose.translation, dtype=np.float64)
+
+
 def verify(
     query_rays: np.ndarray,
     place_rays: np.ndarray,
@@ -223,12 +250,10 @@ def verify(
         return Verification.none()
     x_query = query_rays[pairs[:, 0]]
     x_place = place_rays[pairs[:, 1]]
-    result = pycolmap.estimate_relative_pose(x_place, x_query, params.ransac_options())
-    if result is None:
+    pose = _relative_pose(x_place, x_query, params)
+    if pose is None:
         return Verification.none()
-    pose = result["cam2_from_cam1"]
-    R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
-    t = np.asarray(pose.translation, dtype=np.float64)
+    R, t = pose
     t_norm = float(np.linalg.norm(t))
     if not (np.all(np.isfinite(R)) and np.isfinite(t_norm) and t_norm > 0):
         return Verification.none()

@@ -253,7 +253,8 @@ def describe_likelihood(model: RatioLikelihood) -> str:
     )
     return (
         f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
-        f"{model.per_inlier:.4f} n, lost below {model.min_inliers} inliers; {where}"
+        f"{model.per_inlier:.4f} n ({model.motion} motion), lost below {model.min_inliers} "
+        f"inliers; {where}"
     )
 
 
