@@ -62,24 +62,23 @@ def test_chance_counts_of_a_room_not_in_the_map_are_lost_or_undecided() -> None:
     assert np.mean([top_two_ratio(lik) >= 10 and lik.argmax() == 0 for lik in known]) >= 0.85
 
 
+def with_lead(n_rooms: int, lead: float) -> np.ndarray:
+    counts = np.full(n_rooms, 7.0)
+    counts[0] = lead
+    return counts
+
+
 def test_the_number_of_rooms_does_not_cap_one_frame() -> None:
     model, softmax = RatioLikelihood(), SoftmaxLikelihood()
     for n_rooms in (2, 15, 60):
-        counts = np.full(n_rooms, 7.0)
-        counts[0] = 30.0
-        strong = counts.copy()
-        strong[0] = 300.0
-        # the confidence grows with the margin, whatever the number of rooms
-        assert model.from_room_inliers(strong)[0] > max(0.99, model.from_room_inliers(counts)[0])
+        weak, strong = with_lead(n_rooms, 30.0), with_lead(n_rooms, 300.0)
+        # the confidence grows with the lead, whatever the number of rooms
+        assert model.from_room_inliers(strong)[0] > max(0.99, model.from_room_inliers(weak)[0])
         # the old model: one frame saturates below 1 - floor + floor / N
-        cap = 0.95 + 0.05 / n_rooms + 1e-12
-        assert softmax.from_room_inliers(strong)[0] == pytest.approx(
-            softmax.from_room_inliers(counts)[0]
-        )
-        assert softmax.from_room_inliers(strong)[0] <= cap
-    counts = np.full(15, 7.0)
-    counts[0] = 29.0
-    assert softmax.from_room_inliers(counts)[0] < 0.3  # the 25 % a user measured
+        saturated = softmax.from_room_inliers(with_lead(n_rooms, 1000.0))[0]
+        assert softmax.from_room_inliers(strong)[0] == pytest.approx(saturated)
+        assert saturated <= 0.95 + 0.05 / n_rooms + 1e-12
+    assert softmax.from_room_inliers(with_lead(15, 29.0))[0] < 0.3  # the 25 % a user measured
 
 
 def test_without_same_room_samples_the_defaults_stay() -> None:
