@@ -38,6 +38,7 @@ Parameters come as a frozen :class:`ExtractionParams`; named presets are merged 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
@@ -326,8 +327,37 @@ def camera_for(params: ExtractionParams, width_px: int, height_px: int) -> Panor
     return Cylinder(width_px, height_px, params.focal_px, params.horizon_row_px)
 
 
-def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fingerprint:
+def _detect_strip(
+    padded: np.ndarray, params: ExtractionParams, start_px: int, stop_px: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Keypoints whose column lies in ``[start, stop)`` of the panorama (``xy`` in its pixel
+    coordinates, size, angle, response, descriptors), detected on that strip of the circularly
+    padded image with the wrap margin on both sides."""
+    margin = params.wrap_margin_px
+    keypoints, descriptors = _detect(padded[:, start_px : stop_px + 2 * margin], params)
+    if not keypoints or descriptors is None:
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 128), "f4")
+    xy = np.array([kp.pt for kp in keypoints], dtype=np.float64)
+    xy[:, 0] += start_px - margin
+    keep = (xy[:, 0] >= start_px - 0.5) & (xy[:, 0] < stop_px - 0.5)
+    return (
+        xy[keep],
+        np.array([kp.size for kp in keypoints], dtype=np.float64)[keep],
+        np.array([kp.angle for kp in keypoints], dtype=np.float64)[keep],
+        np.array([kp.response for kp in keypoints], dtype=np.float64)[keep],
+        np.asarray(descriptors, dtype=np.float32)[keep],
+    )
+
+
+def extract(
+    image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS, threads: int = 1
+) -> Fingerprint:
     """Detect and describe features on grey uint8 panorama ``image`` (H x W) with ``params``.
+
+    ``threads = 2`` detects the two halves of the panorama (each with the wrap margin of
+    overlap) on two threads: about 1.5x faster on two cores, with the same keypoints but for a
+    few near the halves' border (SIFT's pyramid sees a narrower image); the map build runs one
+    process per core instead.
 
     Returns a Fingerprint whose keypoints lie in ``-0.5 <= x < W - 0.5`` with robot-frame bearings
     ``-2*pi*x/W`` wrapped to (-pi, pi] (``W`` after shrinking to ``max_width_px``). Nothing
@@ -340,20 +370,18 @@ def extract(image: np.ndarray, params: ExtractionParams = DEFAULT_PARAMS) -> Fin
     if h < 3:
         return Fingerprint.empty(params.detector, w, h, SIFT_DESCRIPTOR_SIZE, record)
     padded = pad_circular(image, params.wrap_margin_px)
-    keypoints, descriptors = _detect(padded, params)
-    if not keypoints or descriptors is None:
+    if threads >= 2 and w >= 4 * params.wrap_margin_px:
+        # OpenCV releases the GIL: two threads detect the two halves on the two cores
+        halves = [(0, w // 2), (w // 2, w)]
+        with ThreadPoolExecutor(len(halves)) as pool:
+            strips = list(pool.map(lambda b: _detect_strip(padded, params, *b), halves))
+    else:
+        strips = [_detect_strip(padded, params, 0, w)]
+    xy, size, angle_deg, response, descriptors = (
+        np.concatenate(column) for column in zip(*strips, strict=True)
+    )
+    if not len(xy):
         return Fingerprint.empty(params.detector, w, h, SIFT_DESCRIPTOR_SIZE, record)
-
-    xy = np.array([kp.pt for kp in keypoints], dtype=np.float64)
-    xy[:, 0] -= params.wrap_margin_px
-    size = np.array([kp.size for kp in keypoints], dtype=np.float64)
-    angle_deg = np.array([kp.angle for kp in keypoints], dtype=np.float64)
-    response = np.array([kp.response for kp in keypoints], dtype=np.float64)
-    descriptors = np.asarray(descriptors, dtype=np.float32)
-
-    keep = (xy[:, 0] >= -0.5) & (xy[:, 0] < w - 0.5)
-    xy, size, angle_deg, response = xy[keep], size[keep], angle_deg[keep], response[keep]
-    descriptors = descriptors[keep]
     keep = ~_seam_duplicates(xy, size, angle_deg, w)
 
     camera = camera_for(params, w, h)
@@ -383,14 +411,19 @@ def extract_preset(image: np.ndarray, preset: str = "sift", **overrides: Any) ->
 
 
 def extract_with_camera(
-    image: np.ndarray, camera: CameraSpec, preset: str = "sift", **overrides: Any
+    image: np.ndarray,
+    camera: CameraSpec,
+    preset: str = "sift",
+    threads: int = 1,
+    **overrides: Any,
 ) -> Fingerprint:
     """``extract`` on a 360° camera image: a mirror image (``camera`` omni) is unwrapped into a
     cylinder first; the camera model is chosen by ``camera`` from the panorama's size, with that
-    model's :data:`CAMERA_DEFAULTS` under the preset and ``overrides`` over everything."""
+    model's :data:`CAMERA_DEFAULTS` under the preset and ``overrides`` over everything.
+    ``threads``: see :func:`extract`."""
     image = _check_image(image)
     if camera.mirror is not None:
         image = unwrap_omni(image, camera.mirror)
     kind = panorama_kind(camera, image.shape[1], image.shape[0])
     merged = {**CAMERA_DEFAULTS[kind], "camera": kind, **overrides}
-    return extract(image, params_from_preset(preset, **merged))
+    return extract(image, params_from_preset(preset, **merged), threads)
