@@ -15,9 +15,12 @@ Frames and conventions (REP-103 robot frames, x forward, y left, z up, CCW posit
   from the place appears at about ``b - yaw_rad`` in the query. (``homing.compass`` measures
   ``current ≈ ref + delta``; with the place as reference, ``delta = -yaw_rad``.) This is the
   visual compass for homing.
-- ``translation_dir`` is the unit translation of ``cam2_from_cam1`` (query frame): the direction
-  from the query to the place's centre is ``-translation_dir``. It is meaningless when the
-  panoramas were taken (almost) at the same spot.
+- ``translation_dir`` is the unit translation ``t`` of ``cam2_from_cam1`` (query frame). Since
+  ``x_query = R x_place + t``, the place's centre (``x_place = 0``) lies at ``t`` in the query
+  frame: ``translation_dir`` itself is the direction from the query to the place, i.e. the home
+  direction when the place is the goal (:func:`home_direction_rad`; pinned by
+  ``tests/localizer/test_localizer_verification.py`` on synthetic rays and on renders). It is
+  meaningless when the panoramas were taken (almost) at the same spot.
 
 Inliers. pycolmap's own inlier mask also requires every triangulated point to lie in front of both
 cameras; with a small baseline (a query taken near the stored place, the case we most want to
@@ -117,6 +120,21 @@ class Verification:
     def none(cls) -> Verification:
         """No geometry: 0 inliers."""
         return cls(0, np.zeros((0, 2), dtype=np.int64), float("nan"), None, None)
+
+    def swapped(self) -> Verification:
+        """The same geometry with query and place exchanged: pairs ``[place_row, query_row]``,
+        ``-yaw_rad``, ``R_place_from_query = R^T`` and the direction from the place to the
+        query in the place's frame, ``-R^T t``."""
+        if self.rotation is None or self.translation_dir is None:
+            return Verification(self.inliers, self.inlier_pairs[:, ::-1], self.yaw_rad, None, None)
+        R_place_from_query = self.rotation.T
+        return Verification(
+            inliers=self.inliers,
+            inlier_pairs=np.ascontiguousarray(self.inlier_pairs[:, ::-1]),
+            yaw_rad=float(wrap_angle_rad(-self.yaw_rad)),
+            rotation=R_place_from_query,
+            translation_dir=-(R_place_from_query @ self.translation_dir),
+        )
 
 
 def _check_rays(name: str, rays: np.ndarray) -> np.ndarray:
@@ -266,3 +284,14 @@ def verify(
         rotation=R,
         translation_dir=t,
     )
+
+
+def home_direction_rad(verification: Verification, min_inliers: int = 1) -> float:
+    """Direction (rad, CCW from the query's heading, (-pi, pi]) from the query to the place on
+    the floor: the azimuth of ``translation_dir`` (see the module docstring). NaN when no
+    geometry was found, it has fewer than ``min_inliers`` inliers, or the translation is
+    (nearly) vertical."""
+    t = verification.translation_dir
+    if t is None or verification.inliers < min_inliers or np.hypot(t[0], t[1]) < 1e-6:
+        return float("nan")
+    return float(np.arctan2(t[1], t[0]))

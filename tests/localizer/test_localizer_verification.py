@@ -13,6 +13,7 @@ from localizer.rays import rays_from_angles, rays_from_fingerprint
 from localizer.verification import (
     Verification,
     VerificationParams,
+    home_direction_rad,
     tangent_sampson_error_rad,
     verify,
     yaw_from_rotation,
@@ -63,6 +64,40 @@ def test_exact_inliers_outliers_rejected_yaw_recovered() -> None:
     np.testing.assert_allclose(
         result.translation_dir, expected_t / np.linalg.norm(expected_t), atol=1e-6
     )
+
+
+@pytest.mark.parametrize(
+    ("yaw_rad", "query_in_place_m"),
+    [(0.0, (1.0, 0.0)), (0.0, (0.0, -1.2)), (1.2, (-0.8, 0.5)), (-2.5, (1.5, 1.5))],
+)
+def test_translation_dir_points_from_the_query_to_the_place(
+    yaw_rad: float, query_in_place_m: tuple[float, float]
+) -> None:
+    """The sign convention: ``+translation_dir`` (not its negative) is the home direction from
+    the query to the place, in the query's robot frame (REP-103, CCW from its heading)."""
+    t_query = np.array([*query_in_place_m, 0.0])
+    query, place, pairs = two_views(np.random.default_rng(2), 80, yaw_rad, t_query)
+    result = verify(query, place, pairs, VerificationParams(seed=0))
+    to_place_in_place = -t_query  # the place is the origin of its own frame
+    to_place_in_query = rz(yaw_rad).T @ to_place_in_place
+    expected = np.arctan2(to_place_in_query[1], to_place_in_query[0])
+    assert abs(wrap_angle_rad(home_direction_rad(result) - expected)) < 1e-6
+    # the same pair seen the other way round: from the place to the query, in the place's frame
+    back = result.swapped()
+    expected_back = np.arctan2(t_query[1], t_query[0])
+    assert abs(wrap_angle_rad(home_direction_rad(back) - expected_back)) < 1e-6
+    assert abs(wrap_angle_rad(back.yaw_rad + yaw_rad)) < 1e-6
+    np.testing.assert_array_equal(back.inlier_pairs, result.inlier_pairs[:, ::-1])
+
+
+def test_home_direction_undefined_without_geometry_or_inliers() -> None:
+    assert np.isnan(home_direction_rad(Verification.none()))
+    rng = np.random.default_rng(4)
+    query, place, pairs = two_views(rng, 30, 0.2, np.array([1.0, 0.0, 0.0]))
+    result = verify(query, place, pairs)
+    assert np.isfinite(home_direction_rad(result, min_inliers=30))
+    assert np.isnan(home_direction_rad(result, min_inliers=31))
+    assert Verification.none().swapped().translation_dir is None
 
 
 def test_pure_rotation_keeps_every_true_pair() -> None:

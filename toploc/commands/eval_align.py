@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from toploc.commands.eval_homing import evaluation_errors, extraction_options, load_and_extract
-from toploc.evaluation.homing import COMPASSES, evaluate_alignment
+from toploc.evaluation.homing import COMPASSES, FeatureSettings, evaluate_alignment
 
 
 @click.command("align")
@@ -38,6 +38,7 @@ from toploc.evaluation.homing import COMPASSES, evaluate_alignment
 def align_command(
     dataset: Path,
     detector: str,
+    camera: str,
     band_deg: float | None,
     rows: str,
     workers: int,
@@ -52,9 +53,8 @@ def align_command(
     Prints the mean ± standard deviation of the error (degrees) per distance bin.
     """
     with evaluation_errors():
-        places, fingerprints, _ = load_and_extract(
-            dataset, detector, band_deg, rows, workers, progress
-        )
+        settings = FeatureSettings(detector, camera, band_deg, rows)
+        places, fingerprints, _ = load_and_extract(dataset, settings, workers, progress)
         run = evaluate_alignment(places, fingerprints, bin_m, progress)
     click.echo(f"{dataset}: {detector} rows={rows} band={band_deg}; error (deg) mean ± std")
     click.echo("distance_m  n     " + "".join(f"{name:>18}" for name in COMPASSES))

@@ -16,15 +16,18 @@ from pathlib import Path
 import click
 import numpy as np
 
-from localizer.features import DETECTORS, ExtractionParams
+from localizer.features import DETECTORS
 from localizer.panorama_io import PanoramaError
 from mapdb.dataset import ManifestEntry
 from mapdb.errors import MapDatabaseError
+from toploc.commands.options import camera_option
 from toploc.evaluation.homing import (
     BEST_METHOD,
     METHODS,
     EvaluationError,
+    FeatureSettings,
     HomingRun,
+    PairCache,
     evaluate_homing,
     extract_fingerprints,
     headings_rad,
@@ -43,7 +46,8 @@ def evaluation_errors() -> Iterator[None]:
 
 
 def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
-    """The shared ``DATASET --detector --band-deg --rows --workers --progress`` options."""
+    """The shared ``DATASET --detector --camera --band-deg --rows --workers --progress``
+    options (the band and the halves are elevations of each image's camera model)."""
     decorators = [
         click.argument("dataset", type=click.Path(path_type=Path)),
         click.option(
@@ -53,18 +57,19 @@ def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
             show_default=True,
             help="Feature detector (sift = DoG keypoints).",
         ),
+        camera_option,
         click.option(
             "--band-deg",
             type=click.FloatRange(0, 90, max_open=True),
             default=None,
-            help="Keep features within ± this many degrees of the horizon.",
+            help="Keep features within ± this many degrees of elevation of the horizon.",
         ),
         click.option(
             "--rows",
             type=click.Choice(("all", "lower", "upper")),
             default="all",
             show_default=True,
-            help="Keep features of all rows or one half.",
+            help="Keep features of all rows or those below (lower) or above (upper) the horizon.",
         ),
         click.option(
             "--workers",
@@ -81,18 +86,12 @@ def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
 
 
 def load_and_extract(
-    dataset: Path,
-    detector: str,
-    band_deg: float | None,
-    rows: str,
-    workers: int,
-    progress: bool,
+    dataset: Path, settings: FeatureSettings, workers: int, progress: bool
 ) -> tuple[tuple[ManifestEntry, ...], list, float]:
     """The places of ``dataset``, their fingerprints, and the extraction time in seconds."""
-    params = ExtractionParams(detector=detector, band_deg=band_deg, rows=rows)
     places = load_places(dataset)
     start = time.perf_counter()
-    fingerprints = extract_fingerprints([p.path for p in places], params, workers, progress)
+    fingerprints = extract_fingerprints([p.path for p in places], settings, workers, progress)
     return places, fingerprints, time.perf_counter() - start
 
 
@@ -122,72 +121,83 @@ def _plot(run: HomingRun, path: Path, title: str) -> None:
 @extraction_options
 @click.option(
     "--method",
+    "methods",
     type=click.Choice(METHODS),
-    default="thesis",
+    multiple=True,
+    default=("thesis",),
     show_default=True,
-    help=f"thesis: ALV of all bearings, headings known; best: {BEST_METHOD}.",
+    help=(
+        f"thesis: ALV of all bearings, headings known; best: {BEST_METHOD}. Repeat to "
+        "evaluate several methods on the same features and matches."
+    ),
 )
 @click.option(
     "--json",
     "json_path",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Write the statistics as JSON.",
+    help="Write the statistics as JSON (a list when several methods are given).",
 )
 @click.option(
     "--plot",
     "plot_path",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Draw the home vectors to the best home (PNG).",
+    help="Draw the home vectors to the best home (PNG; of the first method).",
 )
 def homing_command(
     dataset: Path,
     detector: str,
+    camera: str,
     band_deg: float | None,
     rows: str,
     workers: int,
     progress: bool,
-    method: str,
+    methods: tuple[str, ...],
     json_path: Path | None,
     plot_path: Path | None,
 ) -> None:
     """Home from every place of DATASET to every other place of its room; print the errors.
 
-    Prints mean, median and standard deviation of the angular error (eq. 5.5, degrees), the
-    score (eq. 5.6), the best home, n, and the shares of errors under 90° and 10°.
+    Prints, per method, mean, median and standard deviation of the angular error (eq. 5.5,
+    degrees), the score (eq. 5.6), the best home, n, and the shares of errors under 90° and 10°.
     """
+    settings = FeatureSettings(detector, camera, band_deg, rows)
+    records = []
     with evaluation_errors():
-        places, fingerprints, extract_s = load_and_extract(
-            dataset, detector, band_deg, rows, workers, progress
-        )
-        start = time.perf_counter()
-        run = evaluate_homing(places, fingerprints, method, progress)
-        pairs_s = time.perf_counter() - start
+        places, fingerprints, extract_s = load_and_extract(dataset, settings, workers, progress)
+        cameras = sorted({str(f.params.get("camera", "cylinder")) for f in fingerprints})
+        filters = f"rows={rows}" + ("" if band_deg is None else f" band={band_deg:g}deg")
+        click.echo(f"{dataset}: {detector} {filters}, camera {'/'.join(cameras)}")
+        click.echo(f"  time: extraction {extract_s:.1f} s")
+        cache = PairCache(fingerprints, progress)
+        for k, method in enumerate(methods):
+            start = time.perf_counter()
+            run = evaluate_homing(places, fingerprints, method, progress, cache)
+            pairs_s = time.perf_counter() - start
+            record = _report(run, method, pairs_s)
+            records.append({**record, "detector": detector, "camera": camera, "rows": rows,
+                            "band_deg": band_deg, "dataset": str(dataset)})  # fmt: skip
+            if plot_path is not None and k == 0:
+                _plot(run, plot_path, f"{detector} {filters} {method}")
+                click.echo(f"  wrote {plot_path}")
+    if json_path is not None:
+        payload = records[0] if len(records) == 1 else records
+        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def _report(run: HomingRun, method: str, pairs_s: float) -> dict:
+    """Print one method's statistics; return them as a JSON-ready record."""
     stats = run.stats
-    filters = f"rows={rows}" + ("" if band_deg is None else f" band={band_deg:g}deg")
     resolved = BEST_METHOD if method == "best" else method
-    click.echo(f"{dataset}: {detector} {filters}, method {method} ({resolved})")
+    click.echo(f"  method {method} ({resolved})")
     click.echo(
-        f"  mean {stats.mean_deg:.2f} deg, median {stats.median_deg:.2f} deg, "
+        f"    mean {stats.mean_deg:.2f} deg, median {stats.median_deg:.2f} deg, "
         f"std {stats.std_deg:.2f} deg, score {stats.score:.4f}"
     )
     click.echo(
-        f"  best home {stats.best_home}, n {stats.n} ({stats.n_pairs} pairs, "
+        f"    best home {stats.best_home}, n {stats.n} ({stats.n_pairs} pairs, "
         f"{stats.n_failed} failed), under 90 deg {100 * stats.under_90:.1f}%, "
-        f"under 10 deg {100 * stats.under_10:.1f}%"
+        f"under 10 deg {100 * stats.under_10:.1f}%, time {pairs_s:.1f} s"
     )
-    click.echo(f"  time: extraction {extract_s:.1f} s, pairs {pairs_s:.1f} s")
-    if json_path is not None:
-        record = stats.to_json(
-            detector=detector,
-            method=method,
-            resolved_method=resolved,
-            rows=rows,
-            band_deg=band_deg,
-            dataset=str(dataset),
-        )
-        json_path.write_text(json.dumps(record, indent=2) + "\n")
-    if plot_path is not None:
-        _plot(run, plot_path, f"{detector} {filters} {method}")
-        click.echo(f"  wrote {plot_path}")
+    return stats.to_json(method=method, resolved_method=resolved)

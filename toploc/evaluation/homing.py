@@ -11,13 +11,28 @@ manifest (section 5.6). The others work without headings:
 * ``"matched-alv"``: the ALV of descriptor-matched features only, the rotation from the circular
   mean of their bearing changes;
 * ``"matched-vote"``: the home direction in the most wedges of matched features (see
-  :func:`homing.evaluation.wedge_vote_direction_rad`), the rotation as for ``matched-alv``.
+  :func:`homing.evaluation.wedge_vote_direction_rad`), the rotation as for ``matched-alv``;
+* ``"pose"``: the direction of the translation of the relative pose that the essential-matrix
+  verification finds on the matched rays (:func:`localizer.verification.verify`, the same as
+  the localizer's evidence; :func:`localizer.verification.home_direction_rad`), falling back
+  to ``"matched-alv"`` when the verification finds no geometry;
+* ``"pose-alv"``: the axis of that translation, signed to agree with ``"matched-alv"`` (within
+  90° of it), when the verification has at least ``POSE_MIN_INLIERS`` inliers; else
+  ``"matched-alv"``. The essential matrix fixes the axis of motion well, but its sign comes
+  from which side of both cameras the matched points triangulate on, and a floor texture that
+  repeats about once per place spacing (the rendered house) puts most matches on the wrong
+  side: the raw translation then points away from home (see the README).
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
 few features, so this happens for MSER pairs.
 
-``"best"`` is the one measured best on the rendered lab, square and corridor (``BEST_METHOD``).
+Images are read through their camera model (:func:`localizer.features.extract_with_camera`,
+``camera`` as ``--camera``: ``auto`` reads a 2:1 image as equirectangular), so the horizon band
+and the lower and upper halves are elevations of that model.
+
+``"best"`` is the one measured best over the photo rooms, the house and the rendered lab, square
+and corridor (``BEST_METHOD``).
 """
 
 from __future__ import annotations
@@ -31,6 +46,7 @@ import numpy as np
 from tqdm import tqdm
 
 from homing.alv import alv_from_bearings, angular_error_deg
+from homing.bearings import wrap_angle_rad
 from homing.compass import bearing_shift_rad
 from homing.evaluation import (
     DistanceBin,
@@ -45,15 +61,29 @@ from homing.evaluation import (
     true_home_direction_rad,
     wedge_vote_direction_rad,
 )
-from localizer.features import ExtractionParams, extract
+from localizer.cameras import parse_camera
+from localizer.features import extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
+from localizer.rays import rays_from_fingerprint
+from localizer.verification import Verification, home_direction_rad, verify
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import spawn_process_pool
 
-METHODS: tuple[str, ...] = ("thesis", "best", "alv-compass", "matched-alv", "matched-vote")
-BEST_METHOD = "matched-alv"
+METHODS: tuple[str, ...] = (
+    "thesis",
+    "best",
+    "alv-compass",
+    "matched-alv",
+    "matched-vote",
+    "pose",
+    "pose-alv",
+)
+BEST_METHOD = "pose-alv"
+POSE_MIN_INLIERS = 40
+"""``pose-alv`` trusts a verified pose with at least this many inliers (measured on the photo
+rooms, house, lab, square and corridor: README, "Homing on images")."""
 COMPASSES: tuple[str, ...] = ("histogram", "smoothed", "matched")
 
 
@@ -95,30 +125,50 @@ def load_places(dataset_dir: Path | str) -> tuple[ManifestEntry, ...]:
     return places
 
 
-def _extract_one(path: Path, params: ExtractionParams) -> Fingerprint:
+@dataclass(frozen=True)
+class FeatureSettings:
+    """How the evaluations extract features: a detector preset of
+    :data:`localizer.features.PRESETS` (``"sift"``, ``"mser"``), the ``--camera`` text
+    (:func:`localizer.cameras.parse_camera`), the horizon band (± degrees of elevation, None:
+    all) and the half of the rows (``"all"``, ``"lower"``, ``"upper"``)."""
+
+    detector: str = "sift"
+    camera: str = "auto"
+    band_deg: float | None = None
+    rows: str = "all"
+
+    def extract(self, image: np.ndarray) -> Fingerprint:
+        """The fingerprint of a grey panorama, read through its camera model."""
+        overrides: dict[str, object] = {"rows": self.rows}
+        if self.band_deg is not None:
+            overrides["band_deg"] = self.band_deg
+        return extract_with_camera(image, parse_camera(self.camera), self.detector, **overrides)
+
+
+def _extract_one(path: Path, settings: FeatureSettings) -> Fingerprint:
     import cv2
 
     cv2.setNumThreads(1)  # one process per core already
-    return extract(read_panorama(path), params)
+    return settings.extract(read_panorama(path))
 
 
 def extract_fingerprints(
-    paths: Sequence[Path], params: ExtractionParams, workers: int = 1, progress: bool = False
+    paths: Sequence[Path], settings: FeatureSettings, workers: int = 1, progress: bool = False
 ) -> list[Fingerprint]:
     """One fingerprint per image, in order; a pool of ``workers`` spawned processes if > 1.
 
     An unreadable image raises :class:`localizer.panorama_io.PanoramaError` naming the file.
     """
-    bar = tqdm(total=len(paths), desc=f"extract {params.detector}", disable=not progress)
+    bar = tqdm(total=len(paths), desc=f"extract {settings.detector}", disable=not progress)
     try:
         if workers <= 1:
             results = []
             for path in paths:
-                results.append(extract(read_panorama(path), params))
+                results.append(settings.extract(read_panorama(path)))
                 bar.update()
             return results
         with spawn_process_pool(workers) as pool:
-            futures = [pool.submit(_extract_one, path, params) for path in paths]
+            futures = [pool.submit(_extract_one, path, settings) for path in paths]
             results = []
             for future in futures:
                 results.append(future.result())
@@ -135,20 +185,56 @@ def same_room_pairs(rooms: Sequence[str]) -> np.ndarray:
     return np.argwhere(same).astype(np.int64)
 
 
-def _unordered_matches(
-    fingerprints: Sequence[Fingerprint], pairs: np.ndarray, progress: bool
-) -> dict[tuple[int, int], np.ndarray]:
-    """Matches ``[row in i, row in j]`` for each unordered pair ``(i < j)`` of ``pairs``."""
-    keys = sorted({(min(a, b), max(a, b)) for a, b in pairs.tolist()})
-    return {
-        (i, j): match_descriptors(fingerprints[i].descriptors, fingerprints[j].descriptors)
-        for i, j in tqdm(keys, desc="match", disable=not progress)
-    }
+class PairCache:
+    """Descriptor matches and verified relative poses of unordered pairs of one list of
+    fingerprints, each computed once on first use and shared by every method evaluated on them.
 
+    ``matches(a, b)`` are ``[row in a, row in b]``; ``verification(a, b)`` has ``a`` as the
+    query and ``b`` as the place (its ``translation_dir`` points from ``a`` to ``b`` in ``a``'s
+    robot frame, see :mod:`localizer.verification`).
+    """
 
-def _oriented(matches: dict[tuple[int, int], np.ndarray], a: int, b: int) -> np.ndarray:
-    """Matches ``[row in a, row in b]``."""
-    return matches[(a, b)] if a < b else matches[(b, a)][:, ::-1]
+    def __init__(self, fingerprints: Sequence[Fingerprint], progress: bool = False) -> None:
+        self.fingerprints = tuple(fingerprints)
+        self.progress = progress
+        self._matches: dict[tuple[int, int], np.ndarray] = {}
+        self._verifications: dict[tuple[int, int], Verification] = {}
+
+    def holds(self, fingerprints: Sequence[Fingerprint]) -> bool:
+        """Whether this cache is of exactly these fingerprint objects, in this order."""
+        return len(fingerprints) == len(self.fingerprints) and all(
+            a is b for a, b in zip(fingerprints, self.fingerprints, strict=True)
+        )
+
+    def prepare(self, pairs: np.ndarray, verified: bool = False) -> None:
+        """Compute the matches (and, if ``verified``, the poses) of all of ``pairs`` at once."""
+        keys = sorted({(min(a, b), max(a, b)) for a, b in pairs.tolist()})
+        todo = [k for k in keys if k not in self._matches]
+        for i, j in tqdm(todo, desc="match", disable=not self.progress):
+            self.matches(i, j)
+        if verified:
+            todo = [k for k in keys if k not in self._verifications]
+            for i, j in tqdm(todo, desc="verify", disable=not self.progress):
+                self.verification(i, j)
+
+    def matches(self, a: int, b: int) -> np.ndarray:
+        """Matches ``(k, 2)`` ``[row in a, row in b]`` (Lowe's ratio, cross-checked)."""
+        i, j = min(a, b), max(a, b)
+        if (i, j) not in self._matches:
+            fps = self.fingerprints
+            self._matches[(i, j)] = match_descriptors(fps[i].descriptors, fps[j].descriptors)
+        m = self._matches[(i, j)]
+        return m if a <= b else m[:, ::-1]
+
+    def verification(self, a: int, b: int) -> Verification:
+        """The relative pose of ``a`` (query) and ``b`` (place) from their matched rays."""
+        i, j = min(a, b), max(a, b)
+        if (i, j) not in self._verifications:
+            fps = self.fingerprints
+            rays_i, rays_j = rays_from_fingerprint(fps[i]), rays_from_fingerprint(fps[j])
+            self._verifications[(i, j)] = verify(rays_i, rays_j, self.matches(i, j))
+        v = self._verifications[(i, j)]
+        return v if a <= b else v.swapped()
 
 
 def positions_m(places: Sequence[ManifestEntry]) -> np.ndarray:
@@ -178,43 +264,74 @@ def _true_rotations(places: Sequence[ManifestEntry], pairs: np.ndarray) -> np.nd
     return h[pairs[:, 1]] - h[pairs[:, 0]]
 
 
-def _home_directions(
-    method: str,
-    places: Sequence[ManifestEntry],
-    fingerprints: Sequence[Fingerprint],
-    pairs: np.ndarray,
-    progress: bool,
+def _thesis_directions(
+    places: Sequence[ManifestEntry], bearings: Sequence[np.ndarray], pairs: np.ndarray
 ) -> np.ndarray:
-    bearings = [f.bearings_rad for f in fingerprints]
+    alvs = np.array([alv_from_bearings(b) if len(b) else [0.0, 0.0] for b in bearings])
+    directions = alv_home_directions_rad(
+        alvs[pairs[:, 0]], alvs[pairs[:, 1]], _true_rotations(places, pairs)
+    )
+    empty = np.array([len(bearings[i]) == 0 or len(bearings[j]) == 0 for i, j in pairs])
+    return np.where(empty, np.nan, directions)
+
+
+def _compass_directions(bearings: Sequence[np.ndarray], pairs: np.ndarray) -> np.ndarray:
+    alvs = np.array([alv_from_bearings(b) if len(b) else [0.0, 0.0] for b in bearings])
+    rotations = np.array(
+        [
+            compass_rotation_rad(bearings[i], bearings[j])
+            if len(bearings[i]) and len(bearings[j])
+            else np.nan
+            for i, j in pairs
+        ]
+    )
+    return alv_home_directions_rad(alvs[pairs[:, 0]], alvs[pairs[:, 1]], rotations)
+
+
+def _signed_axis(axis_rad: np.ndarray, reference_rad: np.ndarray) -> np.ndarray:
+    """``axis_rad`` or its opposite, whichever lies within 90° of ``reference_rad``;
+    ``reference_rad`` itself where the axis is NaN (radians, the same frame)."""
+    opposite = np.cos(axis_rad - reference_rad) < 0.0
+    signed = np.where(opposite, wrap_angle_rad(axis_rad + np.pi), axis_rad)
+    return np.where(np.isnan(axis_rad), reference_rad, signed)
+
+
+def _home_directions(
+    method: str, places: Sequence[ManifestEntry], cache: PairCache, pairs: np.ndarray
+) -> np.ndarray:
+    """Home directions (rad, the current robot frame; NaN where undefined) of ``pairs``."""
+    bearings = [f.bearings_rad for f in cache.fingerprints]
     if method == "thesis":
-        alvs = np.array([alv_from_bearings(b) if len(b) else [0.0, 0.0] for b in bearings])
-        directions = alv_home_directions_rad(
-            alvs[pairs[:, 0]], alvs[pairs[:, 1]], _true_rotations(places, pairs)
-        )
-        empty = np.array([len(bearings[i]) == 0 or len(bearings[j]) == 0 for i, j in pairs])
-        return np.where(empty, np.nan, directions)
+        return _thesis_directions(places, bearings, pairs)
     if method == "alv-compass":
-        alvs = np.array([alv_from_bearings(b) if len(b) else [0.0, 0.0] for b in bearings])
-        rotations = np.array(
+        return _compass_directions(bearings, pairs)
+    out = np.full(len(pairs), np.nan)
+    if method == "pose":
+        cache.prepare(pairs, verified=True)
+        out = np.array([home_direction_rad(cache.verification(i, j)) for i, j in pairs.tolist()])
+        fallback = np.isnan(out)  # no geometry: the matched ALV
+        if np.any(fallback):
+            out[fallback] = _home_directions("matched-alv", places, cache, pairs[fallback])
+        return out
+    if method == "pose-alv":
+        matched = _home_directions("matched-alv", places, cache, pairs)
+        cache.prepare(pairs, verified=True)
+        axis = np.array(
             [
-                compass_rotation_rad(bearings[i], bearings[j])
-                if len(bearings[i]) and len(bearings[j])
-                else np.nan
-                for i, j in pairs
+                home_direction_rad(cache.verification(i, j), POSE_MIN_INLIERS)
+                for i, j in pairs.tolist()
             ]
         )
-        return alv_home_directions_rad(alvs[pairs[:, 0]], alvs[pairs[:, 1]], rotations)
+        return _signed_axis(axis, matched)
     estimate = {"matched-alv": matched_alv_direction_rad, "matched-vote": wedge_vote_direction_rad}
-    matches = _unordered_matches(fingerprints, pairs, progress)
-    out = np.empty(len(pairs))
+    cache.prepare(pairs)
     for k, (i, j) in enumerate(pairs.tolist()):
-        m = _oriented(matches, i, j)
+        m = cache.matches(i, j)
         rotation = matched_rotation_rad(bearings[i], bearings[j], m)
         out[k] = estimate[method](bearings[i], bearings[j], m, rotation)
     fallback = np.isnan(out)
     if np.any(fallback):  # no match, or one (its rotation zeroes the home vector): thesis ALV
-        chosen = pairs[fallback]
-        out[fallback] = _home_directions("alv-compass", places, fingerprints, chosen, False)
+        out[fallback] = _compass_directions(bearings, pairs[fallback])
     return out
 
 
@@ -223,11 +340,13 @@ def evaluate_homing(
     fingerprints: Sequence[Fingerprint],
     method: str = "thesis",
     progress: bool = False,
+    cache: PairCache | None = None,
 ) -> HomingRun:
     """Home vectors for every ordered same-room pair with ``method``, and their statistics.
 
-    Raises :class:`EvaluationError` for an unknown method, a length mismatch, no room with two
-    places, or (``thesis``) a pair without headings.
+    ``cache`` (of these ``fingerprints``) shares matches and poses between methods. Raises
+    :class:`EvaluationError` for an unknown method, a length mismatch, no room with two places,
+    or (``thesis``) a pair without headings.
     """
     if method not in METHODS:
         raise EvaluationError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
@@ -238,7 +357,9 @@ def evaluate_homing(
     if len(pairs) == 0:
         raise EvaluationError("no room has two places with positions: nothing to home to")
     _true_rotations(places, pairs)  # the ground truth needs every heading, whatever the method
-    directions = _home_directions(method, places, fingerprints, pairs, progress)
+    if cache is None or not cache.holds(fingerprints):
+        cache = PairCache(fingerprints, progress)
+    directions = _home_directions(method, places, cache, pairs)
     positions = positions_m(places)
     truth = true_home_direction_rad(positions[pairs[:, 0]], positions[pairs[:, 1]])
     errors = pair_errors_deg(directions, headings_rad(places)[pairs[:, 0]], truth)
@@ -267,7 +388,8 @@ def evaluate_alignment(
         raise EvaluationError("no room has two places with positions: nothing to align")
     truth = _true_rotations(places, pairs)
     bearings = [f.bearings_rad for f in fingerprints]
-    matches = _unordered_matches(fingerprints, pairs, progress)
+    cache = PairCache(fingerprints, progress)
+    cache.prepare(pairs)
     estimates: dict[str, list[float]] = {name: [] for name in COMPASSES}
     for i, j in pairs.tolist():
         both = len(bearings[i]) > 0 and len(bearings[j]) > 0
@@ -276,7 +398,7 @@ def evaluate_alignment(
                 bearing_shift_rad(bearings[j], bearings[i], method=name) if both else np.nan
             )
         estimates["matched"].append(
-            matched_rotation_rad(bearings[i], bearings[j], _oriented(matches, i, j))
+            matched_rotation_rad(bearings[i], bearings[j], cache.matches(i, j))
         )
     positions = positions_m(places)
     distances = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
