@@ -139,10 +139,9 @@ class FeatureSettings:
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a grey panorama, read through its camera model."""
-        overrides: dict[str, object] = {"rows": self.rows}
-        if self.band_deg is not None:
-            overrides["band_deg"] = self.band_deg
-        return extract_with_camera(image, parse_camera(self.camera), self.detector, **overrides)
+        band = {} if self.band_deg is None else {"band_deg": self.band_deg}
+        camera = parse_camera(self.camera)
+        return extract_with_camera(image, camera, self.detector, rows=self.rows, **band)
 
 
 def _extract_one(path: Path, settings: FeatureSettings) -> Fingerprint:
