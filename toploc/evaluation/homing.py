@@ -41,6 +41,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -139,7 +140,7 @@ class FeatureSettings:
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a grey panorama, read through its camera model."""
-        band = {} if self.band_deg is None else {"band_deg": self.band_deg}
+        band: dict[str, Any] = {} if self.band_deg is None else {"band_deg": self.band_deg}
         camera = parse_camera(self.camera)
         return extract_with_camera(image, camera, self.detector, rows=self.rows, **band)
 
