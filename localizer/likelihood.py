@@ -101,9 +101,10 @@ class RatioLikelihood:
 
     The defaults (used for a map that cannot be calibrated: fewer than two places in every room,
     and the prior the fit is pulled towards) are the fit on the bare rendered ``house`` (35
-    equirectangular places 1.5 m apart), with ``min_inliers`` lowered to 12 for rooms barer
-    still, and ``per_inlier = 1/15``: where two rooms both match strongly (look-alike rooms,
-    whose difference lies in what the door shows), 15 more inliers multiply the odds by e. The
+    equirectangular places 1.5 m apart), with ``min_inliers`` lowered to 10 for rooms barer
+    still (a real bare house gave its own room 7–28 inliers, the others 5–10), and
+    ``per_inlier = 1/15``: where two rooms both match strongly (look-alike rooms, whose
+    difference lies in what the door shows), 15 more inliers multiply the odds by e. The
     leave-one-out cannot measure this term (it sets look-alikes apart), so the prior carries it;
     on the synthetic look-alike offices of ``tests/localizer/test_localizer_policy.py`` this
     temperature ended 1.7 % of 400 episodes in the wrong office (0.7 % at 20, 7.8 % at 10).
@@ -112,7 +113,7 @@ class RatioLikelihood:
     intercept: float = -6.9
     slope: float = 2.5
     per_inlier: float = 1.0 / 15.0
-    min_inliers: int = 12
+    min_inliers: int = 10
     max_log_ratio: float = 25.0
     motion: str = "general"
     fit: Mapping[str, float] = field(default_factory=dict)
@@ -259,12 +260,16 @@ def fit_ratio_likelihood(
     density ratio. ``ridge`` pulls intercept and slope towards ``prior`` (the defaults) like that
     many pseudo-samples. ``min_inliers`` is one more than the ``known_quantile`` of the
     per-query maximum other-room count (never below the prior's). Without same-room samples
-    (every room has one place) nothing can be fitted and ``prior`` is returned.
+    (every room has one place) the ratio cannot be fitted: ``prior`` is returned with the
+    measured chance level.
     """
     prior = prior or RatioLikelihood()
     same, other = samples.same_room, samples.other_room
+    chance = float(np.quantile(samples.max_other, known_quantile)) if len(samples.max_other) else 0
+    min_inliers = max(prior.min_inliers, math.floor(chance) + 1)
     if len(same) == 0 or len(other) == 0:
-        return prior
+        # one place per room: no same-room count to fit on, but chance is still measured
+        return replace(prior, min_inliers=min_inliers, fit={"max_other_quantile": chance})
     counts = np.concatenate([same, other])
     x = np.column_stack([np.log1p(counts), counts / INLIER_SCALE])
     y = np.concatenate([np.ones(len(same)), np.zeros(len(other))])
@@ -279,7 +284,6 @@ def fit_ratio_likelihood(
         bounds=[(None, None), (0.0, None), (0.0, None)],
     )
     intercept, slope, per_hundred = (float(v) for v in result.x)
-    chance = float(np.quantile(samples.max_other, known_quantile)) if len(samples.max_other) else 0
     fit = {
         "n_same_room": float(len(same)),
         "n_other_room": float(len(other)),
@@ -290,7 +294,6 @@ def fit_ratio_likelihood(
         "max_other_quantile": chance,
         "known_quantile": known_quantile,
     }
-    min_inliers = max(prior.min_inliers, math.floor(chance) + 1)
     return replace(
         prior,
         intercept=intercept,

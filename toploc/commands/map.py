@@ -248,8 +248,8 @@ def describe_likelihood(model: RatioLikelihood) -> str:
     where = (
         f"fitted on {fit['n_same_room']:.0f} same-room and {fit['n_other_room']:.0f} other-room "
         f"counts (medians {fit['same_room_median']:.0f} and {fit['other_room_median']:.0f})"
-        if fit
-        else "left at the defaults (no room has two places)"
+        if "n_same_room" in fit
+        else "ratio left at the defaults (no room has two places to compare)"
     )
     return (
         f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
