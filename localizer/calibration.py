@@ -103,7 +103,7 @@ def calibrate(
     2°, on the photo rooms), which this choice sees in the map's own panoramas.
     """
     params = params or EvidenceParams()
-    motions = ("general", "planar") if params.motion == "auto" else (params.motion,)
+    motions = motions_to_try(params)
     fits = []
     for motion in motions:
         model, samples = _calibrate_with(
@@ -112,6 +112,11 @@ def calibrate(
         fits.append((separation(samples), replace(model, motion=motion), samples))
     _, model, samples = max(fits, key=lambda fit: fit[0])  # ties: general, the first
     return model, samples
+
+
+def motions_to_try(params: EvidenceParams) -> tuple[str, ...]:
+    """The relative-pose models a calibration runs the leave-one-out with (both for ``auto``)."""
+    return ("general", "planar") if params.motion == "auto" else (params.motion,)
 
 
 def separation(samples: CalibrationSamples) -> float:

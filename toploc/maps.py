@@ -15,7 +15,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from localizer.calibration import MAX_QUERIES, calibrate
+from localizer.calibration import MAX_QUERIES, calibrate, motions_to_try
+from localizer.evidence import EvidenceParams
 from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
@@ -48,7 +49,8 @@ def calibrate_map(
     :mod:`localizer.calibration`) and store it in the map; returns it. Raises ``ValueError`` if
     the map has no ``detector`` fingerprint."""
     loaded = load_map(db_path, detector)
-    total = min(MAX_QUERIES, len(loaded.table.place_ids))
+    queries = min(MAX_QUERIES, len(loaded.table.place_ids))
+    total = queries * len(motions_to_try(EvidenceParams()))
     with tqdm(total=total, desc=f"calibrate {detector}", unit="query", disable=not progress) as bar:
 
         def tick() -> None:
