@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from localizer.rays import triangulated_depths
+
 
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -183,13 +185,7 @@ def _in_front(
     rotation: np.ndarray, translation: np.ndarray, x_place: np.ndarray, x_query: np.ndarray
 ) -> int:
     """Pairs triangulating in front of both cameras minus those behind, for this sign of t."""
-    a = x_place @ rotation.T
-    k = np.einsum("ij,ij->i", a, x_query)
-    a_t, c_t = a @ translation, x_query @ translation
-    det = 1.0 - k**2
-    ok = det > 1e-9
-    d_place = (k * c_t - a_t) / np.where(ok, det, 1.0)
-    d_query = (c_t - k * a_t) / np.where(ok, det, 1.0)
-    front = ok & (d_place > 0) & (d_query > 0)
-    behind = ok & (d_place < 0) & (d_query < 0)
+    d_place, d_query = triangulated_depths(x_place @ rotation.T, x_query, translation)
+    front = (d_place > 0) & (d_query > 0)  # parallel rays have depth 0: neither
+    behind = (d_place < 0) & (d_query < 0)
     return int(front.sum()) - int(behind.sum())

@@ -42,6 +42,7 @@ import pycolmap
 
 from homing.bearings import wrap_angle_rad
 from localizer.planar import estimate_planar_pose
+from localizer.rays import triangulated_depths
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
 
@@ -209,24 +210,6 @@ def inlier_mask(
     depth_place, depth_query = triangulated_depths(rotated, rays_query, translation_dir)
     in_front = (depth_place > 0.0) & (depth_query > 0.0)
     return (err <= max_error_rad) & (same_side | in_front)
-
-
-def triangulated_depths(
-    rotated_place: np.ndarray, rays_query: np.ndarray, translation_dir: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Depths ``(d_place, d_query)`` (units of the baseline) of the closest approach of the
-    rays ``d_place * rotated_place + t`` and ``d_query * rays_query`` (query frame; the place
-    rays already rotated into it): the least-squares solution of
-    ``d_place * a - d_query * c = -t``. Parallel rays get depth 0 (no triangulation)."""
-    k = np.einsum("ij,ij->i", rotated_place, rays_query)
-    a_t = rotated_place @ translation_dir
-    c_t = rays_query @ translation_dir
-    det = 1.0 - k**2
-    ok = det > 1e-9
-    safe = np.where(ok, det, 1.0)
-    d_place = np.where(ok, (k * c_t - a_t) / safe, 0.0)
-    d_query = np.where(ok, (c_t - k * a_t) / safe, 0.0)
-    return d_place, d_query
 
 
 def _relative_pose(
