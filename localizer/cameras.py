@@ -47,11 +47,14 @@ def _check_height(height_px: int) -> None:
         raise ValueError(f"panorama height must be a positive integer, got {height_px!r}")
 
 
-def _rays(bearing_rad: np.ndarray, elevation_rad: np.ndarray) -> np.ndarray:
-    cos_e = np.cos(elevation_rad)
-    return np.stack(
-        [cos_e * np.cos(bearing_rad), cos_e * np.sin(bearing_rad), np.sin(elevation_rad)], axis=1
-    )
+def rays_from_angles(bearing_rad: ArrayLike, elevation_rad: ArrayLike) -> np.ndarray:
+    """(n, 3) float64 unit rays in the robot frame from azimuths and elevations (rad)."""
+    b = np.asarray(bearing_rad, dtype=np.float64).reshape(-1)
+    e = np.asarray(elevation_rad, dtype=np.float64).reshape(-1)
+    if b.shape != e.shape:
+        raise ValueError(f"{b.shape[0]} bearings but {e.shape[0]} elevations")
+    cos_e = np.cos(e)
+    return np.stack([cos_e * np.cos(b), cos_e * np.sin(b), np.sin(e)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -149,7 +152,7 @@ def rays_from_pixels(camera: PanoramaCamera, xy_px: ArrayLike) -> np.ndarray:
     """(n, 3) float64 unit rays in the robot frame of OpenCV pixel coordinates ``xy_px`` (n, 2)."""
     xy = np.asarray(xy_px, dtype=np.float64).reshape(-1, 2)
     bearing = bearing_rad_from_column(xy[:, 0], camera.width_px)
-    return _rays(bearing, camera.elevation_rad(xy[:, 1]))
+    return rays_from_angles(bearing, camera.elevation_rad(xy[:, 1]))
 
 
 def pixels_from_rays(camera: PanoramaCamera, rays: ArrayLike) -> np.ndarray:
@@ -290,16 +293,6 @@ def camera_of(fingerprint: Fingerprint) -> PanoramaCamera:
 
 
 # --- masks on rows --------------------------------------------------------------------------------
-
-
-def elevation_rad_from_row(y_px: ArrayLike, camera: PanoramaCamera) -> np.ndarray:
-    """Elevation (rad, positive up) of row coordinate ``y_px`` (down) on ``camera``."""
-    return camera.elevation_rad(y_px)
-
-
-def row_from_elevation(elevation_rad: ArrayLike, camera: PanoramaCamera) -> np.ndarray:
-    """Row coordinate (down) at which elevation ``elevation_rad`` is imaged on ``camera``."""
-    return camera.row_px(elevation_rad)
 
 
 def horizon_band_mask(

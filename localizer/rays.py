@@ -10,20 +10,9 @@ These rays are what the essential-matrix verification (:mod:`localizer.verificat
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from localizer.cameras import PanoramaCamera, camera_from_params, camera_of
+from localizer.cameras import PanoramaCamera, camera_from_params, camera_of, rays_from_angles
 from mapdb.records import Fingerprint, FingerprintTable
-
-
-def rays_from_angles(bearing_rad: ArrayLike, elevation_rad: ArrayLike) -> np.ndarray:
-    """(n, 3) float64 unit rays in the robot frame from azimuths and elevations (rad)."""
-    b = np.asarray(bearing_rad, dtype=np.float64).reshape(-1)
-    e = np.asarray(elevation_rad, dtype=np.float64).reshape(-1)
-    if b.shape != e.shape:
-        raise ValueError(f"{b.shape[0]} bearings but {e.shape[0]} elevations")
-    cos_e = np.cos(e)
-    return np.stack([cos_e * np.cos(b), cos_e * np.sin(b), np.sin(e)], axis=1)
 
 
 def rays_from_keypoints(

@@ -15,13 +15,11 @@ from localizer.cameras import (
     Equirect,
     camera_of,
     elevation_mask,
-    elevation_rad_from_row,
     horizon_band_mask,
     panorama_kind,
     parse_camera,
     pixels_from_rays,
     rays_from_pixels,
-    row_from_elevation,
     rows_mask,
 )
 from mapdb.records import Fingerprint
@@ -35,17 +33,17 @@ from mapdb.records import Fingerprint
 def test_row_elevation_round_trip(height: int, focal: float | None, frac: float) -> None:
     cyl = Cylinder(width_px=1024, height_px=height, focal_px=focal)
     y = frac * (height - 1)
-    assert row_from_elevation(elevation_rad_from_row(y, cyl), cyl) == pytest.approx(y, abs=1e-6)
+    assert cyl.row_px(cyl.elevation_rad(y)) == pytest.approx(y, abs=1e-6)
 
 
 def test_cylinder_defaults_and_elevation_sign() -> None:
     cyl = Cylinder(width_px=628, height_px=101)
     assert cyl.f_px == pytest.approx(628 / (2 * np.pi))
     assert cyl.horizon_px == 50.0
-    e = elevation_rad_from_row([0.0, 50.0, 100.0], cyl)
+    e = cyl.elevation_rad([0.0, 50.0, 100.0])
     assert e[0] > 0 and e[1] == 0 and e[2] < 0
     # One row at the horizon subtends one column's angle (square pixels on the cylinder).
-    assert elevation_rad_from_row(49.0, cyl) == pytest.approx(2 * np.pi / 628, rel=1e-4)
+    assert cyl.elevation_rad(49.0) == pytest.approx(2 * np.pi / 628, rel=1e-4)
 
 
 @pytest.mark.parametrize("band_deg", [0.0, 5.0, 10.0, 20.0, 45.0])

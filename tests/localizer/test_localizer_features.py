@@ -7,7 +7,7 @@ import pytest
 from localizer_images import make_textured_panorama
 
 from homing.bearings import wrap_angle_rad
-from localizer.cameras import CameraSpec, Cylinder, Equirect, elevation_rad_from_row, parse_camera
+from localizer.cameras import CameraSpec, Cylinder, Equirect, parse_camera
 from localizer.features import (
     ExtractionParams,
     extract,
@@ -115,9 +115,9 @@ def test_band_filter_keeps_only_band(textured: np.ndarray, detector: str, band_d
     h, w = textured.shape
     full = extract(textured, _all(detector))
     band = extract(textured, _all(detector, band_deg=band_deg))
-    elevation_deg = np.rad2deg(elevation_rad_from_row(band.keypoints_xy[:, 1], Cylinder(w, h)))
+    elevation_deg = np.rad2deg(Cylinder(w, h).elevation_rad(band.keypoints_xy[:, 1]))
     assert np.all(np.abs(elevation_deg) <= band_deg)
-    full_elevation = np.rad2deg(elevation_rad_from_row(full.keypoints_xy[:, 1], Cylinder(w, h)))
+    full_elevation = np.rad2deg(Cylinder(w, h).elevation_rad(full.keypoints_xy[:, 1]))
     expected = full.keypoints_xy[np.abs(full_elevation) <= band_deg]
     np.testing.assert_array_equal(band.keypoints_xy, expected)
     assert 0 < band.n < full.n

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from homing.bearings import wrap_angle_rad
-from localizer.cameras import Cylinder
-from localizer.rays import rays_from_angles, rays_from_fingerprint
+from localizer.cameras import Cylinder, rays_from_angles
+from localizer.rays import rays_from_fingerprint
 from localizer.verification import (
     Verification,
     VerificationParams,
