@@ -116,9 +116,9 @@ class BeliefFilter:
             if not (math.isfinite(weight) and weight >= 0):
                 raise ValueError(f"prior weight for room {room!r} must be >= 0, got {weight}")
             weights[index[room]] = weight
-        if weights.sum() <= 0:
+        if weights.max() <= 0:
             raise ValueError(f"prior weights are all zero: {dict(prior)}")
-        self._belief = fp_normalize(weights)
+        self._belief = fp_normalize(weights / weights.max())  # huge weights would sum to inf
 
     def predict(self, stay_probability: float | None = None) -> np.ndarray:
         """Spread the belief along the graph after a move; returns the new belief.

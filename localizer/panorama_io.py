@@ -17,16 +17,28 @@ mirror's rim sees downwards, pass ``outer_at_top=False``.
 
 from __future__ import annotations
 
+import io
 import math
+import stat
+import warnings
 from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image
 
 from localizer.cameras import MirrorUnwrap
 
 MIN_SIDE_PX = 2
 """Smallest accepted image side in pixels (a one-pixel-wide image is not a panorama)."""
+
+MAX_IMAGE_PIXELS = 75_000_000
+"""Largest accepted image, width x height, checked in the file's header before decoding. It
+admits the largest consumer 360° photos (Insta360 X4: 11968 x 5984, 72 MP); decoding one takes
+about 3 bytes per pixel."""
+
+MAX_FILE_BYTES = 512 * 1024 * 1024
+"""Largest accepted image file (bytes), checked before reading it."""
 
 _MAGIC: tuple[tuple[bytes, str], ...] = (
     (b"\x89PNG\r\n\x1a\n", "PNG"),
@@ -54,10 +66,22 @@ def _sniff_format(head: bytes) -> str | None:
 
 
 def _read_bytes(path: Path) -> bytes:
-    if not path.exists():
-        raise PanoramaError(f"{path}: no such file")
-    if path.is_dir():
+    """The bytes of ``path``, which must be a regular file (a FIFO or ``/dev/zero`` would never
+    end) of at most ``MAX_FILE_BYTES``."""
+    try:
+        status = path.stat()
+    except FileNotFoundError:
+        raise PanoramaError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise PanoramaError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
+    if stat.S_ISDIR(status.st_mode):
         raise PanoramaError(f"{path}: is a directory, not an image file")
+    if not stat.S_ISREG(status.st_mode):
+        raise PanoramaError(f"{path}: not a regular file (a device, FIFO or socket)")
+    if status.st_size > MAX_FILE_BYTES:
+        raise PanoramaError(
+            f"{path}: file is {status.st_size} bytes; at most {MAX_FILE_BYTES} are read"
+        )
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -78,25 +102,63 @@ def _check_size(image: np.ndarray, source: str) -> None:
         )
 
 
-def read_grey_image(path: str | Path) -> np.ndarray:
-    """Read any image file (PNG, JPEG, ...; grey, colour or 16-bit) as a 2-D ``uint8`` grey array.
+def header_size_px(data: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` of the encoded image ``data`` from its header, without decoding the
+    pixels (Pillow reads only the header); None if Pillow does not know the format.
 
-    Raises PanoramaError for a missing, empty, unreadable, truncated or corrupt file, a file that
-    is not an image, and an image smaller than ``MIN_SIDE_PX`` on a side.
-    """
-    path = Path(path)
-    data = _read_bytes(path)
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+    Raises ``PIL.Image.DecompressionBombError`` past Pillow's own limit (about 179 MP)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            with Image.open(io.BytesIO(data)) as image:
+                return image.size
+        except (OSError, ValueError, SyntaxError):
+            return None
+
+
+def check_image_header(data: bytes, source: str, max_pixels: int = MAX_IMAGE_PIXELS) -> None:
+    """Raise PanoramaError naming ``source`` if the header of ``data`` says the image has more
+    than ``max_pixels`` pixels (width x height), before anything decodes it."""
+    limit = f"at most {max_pixels} pixels are accepted (shrink it first)"
+    try:
+        size = header_size_px(data)
+    except Image.DecompressionBombError as error:
+        raise PanoramaError(f"{source}: {error.args[0].split(',')[0]}; {limit}") from None
+    if size is not None and size[0] * size[1] > max_pixels:
+        raise PanoramaError(f"{source}: image is {size[0]}x{size[1]} px; {limit}")
+
+
+def decode_grey(data: bytes, source: str, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
+    """Decode an encoded image (PNG, JPEG, ...; grey, colour or 16-bit) to a 2-D ``uint8`` grey
+    array; PanoramaError naming ``source`` if it is too large, not an image, truncated, corrupt,
+    or smaller than ``MIN_SIDE_PX`` on a side."""
+    check_image_header(data, source, max_pixels)
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+    except (cv2.error, MemoryError) as error:
+        reason = str(error).strip().splitlines()[-1] if str(error).strip() else "out of memory"
+        raise PanoramaError(f"{source}: cannot decode the image ({reason})") from None
     if image is None:
         fmt = _sniff_format(data[:16])
         if fmt is None:
             raise PanoramaError(
-                f"{path}: not an image (content is not a recognised image format, "
+                f"{source}: not an image (content is not a recognised image format, "
                 f"{len(data)} bytes)"
             )
-        raise PanoramaError(f"{path}: corrupt or truncated {fmt} file ({len(data)} bytes)")
-    _check_size(image, str(path))
+        raise PanoramaError(f"{source}: corrupt or truncated {fmt} file ({len(data)} bytes)")
+    _check_size(image, source)
     return image
+
+
+def read_grey_image(path: str | Path, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
+    """Read any image file (PNG, JPEG, ...; grey, colour or 16-bit) as a 2-D ``uint8`` grey array.
+
+    Raises PanoramaError for a missing, empty, unreadable, truncated or corrupt file, a file that
+    is not a regular file or not an image, an image larger than ``max_pixels`` (read from its
+    header, before decoding), and an image smaller than ``MIN_SIDE_PX`` on a side.
+    """
+    path = Path(path)
+    return decode_grey(_read_bytes(path), str(path), max_pixels)
 
 
 def read_panorama(path: str | Path) -> np.ndarray:

@@ -57,3 +57,8 @@ class Robot(Protocol):
     def odometry(self) -> Odometry:
         """The current dead-reckoned pose."""
         ...
+
+    def stop(self) -> None:
+        """Stop the base now; called from another thread while :meth:`move` runs, which then
+        returns early with what was done."""
+        ...

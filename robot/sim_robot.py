@@ -329,3 +329,6 @@ class SimulatedRobot:
     def odometry(self) -> Odometry:
         """Dead-reckoned pose in the odometry frame (the commanded motion integrated)."""
         return self._odom
+
+    def stop(self) -> None:
+        """Nothing to stop: a simulated move is done at once (in simulated time)."""

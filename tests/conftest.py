@@ -33,3 +33,14 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
         connect_known_rooms(map_db, read_edges(dataset))
     calibrate_map(db_path, "sift")  # as `toploc map build` does
     return db_path, dataset
+
+
+@pytest.fixture
+def zbus():
+    """Two real Zenoh sessions on 127.0.0.1 (``bus_helpers.Bus``), closed after the test."""
+    from bus_helpers import Bus
+
+    pair = Bus()
+    yield pair
+    pair.client.close()
+    pair.server.close()

@@ -28,6 +28,8 @@ from __future__ import annotations
 import json
 import logging
 import math
+import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -38,12 +40,16 @@ SCHEMA_VERSION = 1
 ROOT = "toploc"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_TIMEOUT_S = 5.0
+EARLY_END = 0.9
+"""A query that ends without a reply before this fraction of its timeout was not timed out: no
+queryable matched, or the one that did went away (:func:`request`)."""
 MODES = ("peer", "client", "router")
 
 # Key suffixes under toploc/<robot_id>/ (see the README's bus table).
 CAMERA_PANORAMA = "camera/panorama"
 CAMERA_CAPTURE = "camera/capture"
 BASE_CMD = "base/cmd"
+BASE_STOP = "base/stop"
 BASE_ODOM = "base/odom"
 BASE_BUMPERS = "base/bumpers"
 LOCALIZER_BELIEF = "localizer/belief"
@@ -75,7 +81,8 @@ class BusReplyError(BusError):
     """The node answered a query with an error reply; ``message`` is its text."""
 
     def __init__(self, key_expr: str, message: str) -> None:
-        super().__init__(f"{key_expr}: {message}")
+        named = message if message.startswith(f"{key_expr}: ") else f"{key_expr}: {message}"
+        super().__init__(named)
         self.key_expr = key_expr
         self.message = message
 
@@ -214,20 +221,38 @@ def check_fields(where: str, message: Mapping[str, Any], required: Mapping[str, 
             )
 
 
+def _longest_string(value: Any) -> int:
+    """The length of the longest string (key or value) anywhere in a parsed JSON ``value``."""
+    if isinstance(value, str):
+        return len(value)
+    if isinstance(value, dict):
+        return max((max(len(k), _longest_string(v)) for k, v in value.items()), default=0)
+    if isinstance(value, list):
+        return max((_longest_string(v) for v in value), default=0)
+    return 0
+
+
 def decode(
     key_expr: str,
     data: bytes | None,
     required: Mapping[str, FieldType] | None = None,
     kind: str | None = None,
+    max_bytes: int | None = None,
+    max_string_chars: int | None = None,
 ) -> dict[str, Any]:
     """Parse a JSON message received on ``key_expr`` and check its envelope and fields.
 
     ``required`` maps field name to type (``float`` accepts JSON integers; ``(dict, type(None))``
-    allows null). Raises :class:`BusMessageError` naming the key: not UTF-8 JSON, not an object,
-    wrong ``schema`` version, wrong ``kind`` (if given), missing or ill-typed field.
+    allows null). Raises :class:`BusMessageError` naming the key: larger than ``max_bytes``, not
+    UTF-8 JSON, not an object, a string longer than ``max_string_chars``, wrong ``schema``
+    version, wrong ``kind`` (if given), missing or ill-typed field.
     """
     if data is None or len(data) == 0:
         raise BusMessageError(f"{key_expr}: empty payload, expected a JSON object")
+    if max_bytes is not None and len(data) > max_bytes:
+        raise BusMessageError(
+            f"{key_expr}: payload is {len(data)} bytes; at most {max_bytes} are accepted"
+        )
     try:
         message = json.loads(bytes(data).decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
@@ -238,6 +263,11 @@ def decode(
     if not isinstance(message, dict):
         raise BusMessageError(
             f"{key_expr}: payload must be a JSON object, got {type(message).__name__}"
+        )
+    if max_string_chars is not None and _longest_string(message) > max_string_chars:
+        raise BusMessageError(
+            f"{key_expr}: a string of {_longest_string(message)} characters; at most "
+            f"{max_string_chars} are accepted"
         )
     schema = message.get("schema")
     if schema != SCHEMA_VERSION or isinstance(schema, bool):
@@ -271,15 +301,20 @@ class Reply:
 Handler = Callable[[bytes | None], Reply]
 
 
-def serve(session: zenoh.Session, key_expr: str, handler: Handler) -> zenoh.Queryable:
+def serve(
+    session: zenoh.Session, key_expr: str, handler: Handler, threaded: bool = False
+) -> zenoh.Queryable:
     """Declare a queryable on ``key_expr`` answering with ``handler(payload_bytes_or_None)``.
 
     Any exception in the handler becomes an error reply carrying its message (BusMessageError
     and ValueError as is, others prefixed with their type); the query is always dropped so the
-    querier never waits for its timeout. Runs on the queryable's own Python thread.
+    querier never waits for its timeout. Runs on the queryable's own Python thread, so queries
+    on one key are answered one after another; with ``threaded``, each query is answered on a
+    thread of its own as soon as it arrives (the handler then orders them itself, e.g. to drop
+    those whose querier has given up while they waited).
     """
 
-    def callback(query: zenoh.Query) -> None:
+    def answer(query: zenoh.Query) -> None:
         with query:
             payload = query.payload
             try:
@@ -298,6 +333,12 @@ def serve(session: zenoh.Session, key_expr: str, handler: Handler) -> zenoh.Quer
                 query.reply(key_expr, reply.payload, attachment=reply.attachment)
             except zenoh.ZError:  # session closing
                 _log.debug("%s: could not send the reply", key_expr)
+
+    def callback(query: zenoh.Query) -> None:
+        if threaded:
+            threading.Thread(target=answer, args=(query,), daemon=True).start()
+        else:
+            answer(query)
 
     return session.declare_queryable(key_expr, zenoh.handlers.Callback(callback, indirect=True))
 
@@ -330,10 +371,12 @@ def request(
     """
     if not timeout_s > 0:
         raise ValueError(f"timeout_s must be positive, got {timeout_s!r}")
+    start_s = time.monotonic()
     try:
         replies = list(session.get(key_expr, payload=payload, timeout=timeout_s))
     except zenoh.ZError as error:
         raise BusError(f"{key_expr}: query failed: {error}") from error
+    waited_s = time.monotonic() - start_s
     errors: list[str] = []
     for reply in replies:
         if reply.ok is not None:
@@ -347,6 +390,11 @@ def request(
             else "this session reaches no other Zenoh node: is anything listening at the "
             "connect endpoints?"
         )
+        if waited_s < EARLY_END * timeout_s:
+            raise BusTimeout(
+                f"{key_expr}: no reply after {waited_s:.1f} s (of {timeout_s:g} s allowed): no "
+                f"node serves this key, or the one asked left the bus ({hint})"
+            )
         raise BusTimeout(f"{key_expr}: no reply within {timeout_s:g} s ({hint})")
     raise BusReplyError(key_expr, "; ".join(errors))
 

@@ -1,6 +1,19 @@
-"""The ``toploc`` command line: a click group that registers one module per subcommand."""
+"""The ``toploc`` command line: a click group that registers one module per subcommand.
+
+Errors: a command reports what the user can fix as ``Error: <message>`` (a
+``click.ClickException``). Anything else that escapes a command is still printed as one line,
+``Error: <type>: <message> (run with --debug for the traceback)``, exit status 1; ``toploc
+--debug <command>`` lets it through with its traceback. SIGTERM is handled like Ctrl-C
+(``KeyboardInterrupt``: cleanup runs, exit status 130), unless a command installs its own
+handler (``serve`` does).
+"""
 
 from __future__ import annotations
+
+import signal
+import sys
+from types import FrameType
+from typing import Any
 
 import click
 
@@ -15,11 +28,52 @@ from toploc.commands.serve import serve
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
 
+INTERRUPTED_EXIT = 130  # 128 + SIGINT, what shells report for Ctrl-C
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+
+def one_line(error: BaseException) -> str:
+    """The first line of ``error``'s message, prefixed with its type (an unexpected error)."""
+    lines = str(error).strip().splitlines()
+    text = lines[0] if lines else "(no message)"
+    return f"{type(error).__name__}: {text}"
+
+
+def _terminate_like_ctrl_c(signum: int, _frame: FrameType | None) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+class ToplocGroup(click.Group):
+    """The root group: one-line errors unless ``--debug``; Ctrl-C and SIGTERM exit 130."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        previous = signal.getsignal(signal.SIGTERM)
+        if previous is signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, _terminate_like_ctrl_c)
+        try:
+            return super().invoke(ctx)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            sys.exit(INTERRUPTED_EXIT)
+        except Exception as error:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            raise click.ClickException(
+                f"{one_line(error)} (run with --debug for the traceback)"
+            ) from error
+        finally:
+            if previous is signal.SIG_DFL:
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+@click.group(cls=ToplocGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="toploc")
-def main() -> None:
+@click.option("--debug", is_flag=True, help="Show the traceback of an unexpected error.")
+@click.pass_context
+def main(ctx: click.Context, debug: bool) -> None:
     """toploc: which room is the robot in, and where should it drive to find out."""
+    ctx.obj = {"debug": debug}
 
 
 main.add_command(simulate)

@@ -5,20 +5,64 @@
 thread-safe: one localization at a time (a second waits), ``belief()`` always answers at once
 with the latest snapshot, and ``reset()`` during a run is refused with a clear error rather
 than changing the belief under the running loop.
+
+A waiting localization whose client has given up (its ``deadline_s`` passed) is dropped before
+it runs, and at most ``max_pending`` wait. ``stop()`` ends a running localization at its next
+capture or move (within about one feature extraction) and refuses new ones: what a service
+does on SIGTERM.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import Localizer
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 
 RESET_WAIT_S = 1.0
+_log = logging.getLogger(__name__)
+POLL_S = 0.1  # how often a waiting localization looks at its deadline and at stop()
+
+
+class LocalizationStoppedError(RuntimeError):
+    """The service is stopping: the localization was ended, or not started."""
+
+
+class LocalizationDroppedError(TimeoutError):
+    """A localization was not run: its client gave up while it waited, or too many wait."""
+
+
+class StoppableRobot:
+    """``robot``, but every capture and move first checks ``stopping`` and raises
+    :class:`LocalizationStoppedError` once it is set (the loop then unwinds at once)."""
+
+    def __init__(self, robot: Robot, stopping: threading.Event) -> None:
+        self.robot = robot
+        self.stopping = stopping
+
+    def _check(self) -> None:
+        if self.stopping.is_set():
+            raise LocalizationStoppedError("the service is stopping")
+
+    def capture(self) -> Capture:
+        self._check()
+        return self.robot.capture()
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self._check()
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self) -> Odometry:
+        return self.robot.odometry()
+
+    def stop(self) -> None:
+        self.robot.stop()
 
 
 class LocalizationRunner:
@@ -35,9 +79,14 @@ class LocalizationRunner:
         policy: str = "separating",
         params: ActiveParams | None = None,
         publish: Callable[[dict[str, Any]], object] | None = None,
+        max_pending: int = 8,
     ) -> None:
         self.localizer = localizer
-        self.robot = robot
+        self._stopping = threading.Event()
+        self.robot = StoppableRobot(robot, self._stopping)
+        self.max_pending = max_pending
+        self._pending = 0
+        self._pending_lock = threading.Lock()
         self.policy = policy
         self.params = params or ActiveParams()
         self.publish = publish
@@ -57,10 +106,46 @@ class LocalizationRunner:
         with self._snapshot_lock:
             return dict(self._latest)
 
-    def localize(self, active: bool) -> dict[str, Any]:
+    def _wait_for_turn(self, deadline_s: float | None) -> None:
+        """Take the run lock, or raise: stopping, or ``deadline_s`` (``time.monotonic()``)
+        passed while waiting, or ``max_pending`` already wait."""
+        with self._pending_lock:
+            if self._pending >= self.max_pending:
+                raise LocalizationDroppedError(
+                    f"refused: {self._pending} localizations are already waiting "
+                    f"(at most {self.max_pending})"
+                )
+            self._pending += 1
+        try:
+            while not self._run_lock.acquire(timeout=POLL_S):
+                if self._stopping.is_set():
+                    raise LocalizationStoppedError("the service is stopping")
+                if deadline_s is not None and time.monotonic() > deadline_s:
+                    raise LocalizationDroppedError(
+                        "dropped: the client's timeout passed while it waited for its turn"
+                    )
+        finally:
+            with self._pending_lock:
+                self._pending -= 1
+        if self._stopping.is_set():
+            self._run_lock.release()
+            raise LocalizationStoppedError("the service is stopping")
+        if deadline_s is not None and time.monotonic() > deadline_s:
+            self._run_lock.release()
+            raise LocalizationDroppedError(
+                "dropped: the client's timeout passed while it waited for its turn"
+            )
+
+    def localize(self, active: bool, deadline_s: float | None = None) -> dict[str, Any]:
         """Capture and update the belief; with ``active``, start from a uniform belief and drive
-        to disambiguate while it is ambiguous (this takes a while)."""
-        with self._run_lock:
+        to disambiguate while it is ambiguous (this takes a while).
+
+        ``deadline_s`` (``time.monotonic()``): when the client stops waiting; a localization
+        still waiting for its turn then is dropped (:class:`LocalizationDroppedError`).
+        :class:`LocalizationStoppedError` after :meth:`stop`.
+        """
+        self._wait_for_turn(deadline_s)
+        try:
             if active:
                 result = localize_actively(
                     self.localizer, self.robot, self.policy, self.params, on_belief=self._set
@@ -71,9 +156,26 @@ class LocalizationRunner:
                 belief = self.localizer.update(observation)
             self._set(belief)
             return self.belief()
+        finally:
+            self._run_lock.release()
+
+    def stop(self, wait_s: float = 2.0) -> bool:
+        """End the running localization at its next capture or move, refuse new ones, and wait
+        up to ``wait_s`` seconds for it to end; whether it did."""
+        self._stopping.set()
+        try:
+            self.robot.stop()  # a move in progress returns early
+        except Exception as error:  # stopping must go on whatever the base says
+            _log.warning("could not stop the robot: %s", error)
+        ended = self._run_lock.acquire(timeout=wait_s)
+        if ended:
+            self._run_lock.release()
+        return ended
 
     def reset(self, prior: Mapping[str, float] | None) -> dict[str, Any]:
         """Uniform belief, or ``prior``; ``RuntimeError`` while a localization is running."""
+        if self._stopping.is_set():
+            raise LocalizationStoppedError("the service is stopping")
         if not self._run_lock.acquire(timeout=RESET_WAIT_S):
             raise RuntimeError("a localization is running; reset when it has finished")
         try:

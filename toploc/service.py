@@ -18,6 +18,7 @@ import zenoh
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Robot
 from toploc.bus import BusConfig, open_session
+from toploc.limits import Limits
 from toploc.maps import load_map
 from toploc.nodes.localizer import LocalizerNode
 from toploc.nodes.mapdb import MapNode
@@ -42,10 +43,15 @@ def start_service(
     robot: Robot | None = None,
     policy: str = "separating",
     localizer_config: LocalizerConfig | None = None,
+    limits: Limits | None = None,
 ) -> Iterator[Service]:
-    """Serve the map at ``db_path`` for robot ``config.robot_id``; everything is undeclared and
-    the session closed on exit (an unclosed session keeps the process alive)."""
+    """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``.
+
+    On exit a running localization is ended (at its next capture or move), then everything is
+    undeclared and the session closed (an unclosed session keeps the process alive).
+    """
     localizer_config = localizer_config or LocalizerConfig()
+    limits = limits or Limits()
     loaded = load_map(db_path, localizer_config.detector)
     localizer = Localizer(loaded, localizer_config)
     robot_id = config.robot_id
@@ -53,10 +59,13 @@ def start_service(
         session = stack.enter_context(open_session(config))
         stack.enter_context(MapNode(session, robot_id, db_path))
         if robot is not None:
-            stack.enter_context(RobotNode(session, robot_id, robot))
+            stack.enter_context(RobotNode(session, robot_id, robot, limits))
         remote = RemoteRobot(session, robot_id)
         stack.callback(remote.close)
-        runner = LocalizationRunner(localizer, remote, policy)
-        node = stack.enter_context(LocalizerNode(session, robot_id, runner))
+        runner = LocalizationRunner(
+            localizer, remote, policy, max_pending=limits.max_pending_localizations
+        )
+        node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
         runner.publish = node.publish
+        stack.callback(runner.stop)
         yield Service(session, config, runner, localizer)

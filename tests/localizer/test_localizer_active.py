@@ -53,6 +53,9 @@ class BlindRobot:
     def odometry(self) -> Odometry:
         return Odometry(0.0, 0.0, 0.0)
 
+    def stop(self) -> None:
+        """Moves are instantaneous here: nothing to stop."""
+
 
 def test_a_robot_that_sees_nothing_is_lost_and_does_not_drive(localizer):
     robot = BlindRobot()

@@ -183,6 +183,9 @@ class PointRobot:
     def odometry(self) -> Odometry:
         return Odometry(self.pose.x_m, self.pose.y_m, self.pose.heading_rad)
 
+    def stop(self) -> None:
+        """Moves are instantaneous here: nothing to stop."""
+
 
 def test_drive_home_reaches_home_among_point_landmarks():
     world = LandmarkWorld(5)

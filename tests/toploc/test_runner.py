@@ -55,6 +55,9 @@ class GatedRobot:
     def odometry(self):
         return self.robot.odometry()
 
+    def stop(self):
+        self.robot.stop()
+
 
 @pytest.fixture(scope="module")
 def loaded(building_map) -> LoadedMap:

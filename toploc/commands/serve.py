@@ -16,6 +16,7 @@ from localizer.policy import POLICIES
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
 from toploc.commands.options import camera_option
+from toploc.limits import Limits, load_limits
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.service import start_service
 
@@ -45,6 +46,13 @@ from toploc.service import start_service
 @click.option(
     "--no-sim", is_flag=True, help="No simulated robot: drive the robot node already on the bus."
 )
+@click.option(
+    "--limits",
+    "limits_path",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see the README's Limits).",
+)
 @camera_option
 def serve(
     db_path: Path | None,
@@ -58,8 +66,13 @@ def serve(
     seed: int,
     no_sim: bool,
     camera: str,
+    limits_path: Path | None,
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
+    try:
+        limits = Limits() if limits_path is None else load_limits(limits_path)
+    except ValueError as error:
+        raise click.ClickException(f"--limits: {error}") from error
     db = db_path or ensure_world_map(sim_world)
     robot = None
     if not no_sim:
@@ -70,7 +83,7 @@ def serve(
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
-        with start_service(db, config, robot, policy, localizer_config):
+        with start_service(db, config, robot, policy, localizer_config, limits):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
             click.echo(
                 f"serving {db} as toploc/{robot_id}/** ({mode}, listen {list(listen)}, "

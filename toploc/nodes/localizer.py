@@ -4,10 +4,13 @@
 Keys under ``toploc/<robot_id>/``:
 
 - ``localizer/belief``: queryable (the latest belief) and publication (whenever it changes).
-- ``localizer/localize`` (queryable): optional ``{"active": bool}`` (default false); localize
-  now, reply the new belief. ``active`` allows the robot to move to disambiguate, so the reply
-  can take minutes: the client's timeout must allow for it.
-- ``localizer/reset`` (queryable): optional ``{"prior": {room: p}}``; uniform belief without.
+- ``localizer/localize`` (queryable): optional ``{"kind": "localize", "active": bool,
+  "timeout_s": float}`` (default: not active, no timeout); localize now, reply the new belief.
+  ``active`` allows the robot to move to disambiguate, so the reply can take minutes: the
+  client's timeout must allow for it. ``timeout_s`` is how long the client waits: a query still
+  waiting for its turn after that is dropped unrun.
+- ``localizer/reset`` (queryable): optional ``{"kind": "reset", "prior": {room: p}}``; uniform
+  belief without.
 - liveliness token ``alive/localizer``.
 
 The belief is the one JSON form of :meth:`localizer.belief.RoomBelief.to_json` (``kind:
@@ -15,7 +18,8 @@ The belief is the one JSON form of :meth:`localizer.belief.RoomBelief.to_json` (
 
 Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
 indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
-``reset`` queries; concurrent ``localize`` queries are handled one after another. The service
+``reset`` queries; each ``localize`` query gets a thread of its own as it arrives, and the
+service runs them one after another (dropping those whose client has given up). The service
 must therefore tolerate ``belief()``/``reset()`` being called while ``localize()`` runs. A
 service exception becomes an error reply with its message; the node stays up.
 """
@@ -24,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -31,6 +36,7 @@ import zenoh
 
 from localizer.belief import RoomBelief
 from toploc import bus
+from toploc.limits import Limits
 
 NODE_NAME = "localizer"
 _log = logging.getLogger(__name__)
@@ -44,8 +50,9 @@ class LocalizationService(Protocol):
         """The current belief as JSON-able dict (see the module docstring)."""
         ...
 
-    def localize(self, active: bool) -> dict:
-        """Capture, match and update now (moving to disambiguate if ``active``); the belief."""
+    def localize(self, active: bool, deadline_s: float | None = None) -> dict:
+        """Capture, match and update now (moving to disambiguate if ``active``); the belief.
+        Not started once ``deadline_s`` (``time.monotonic()``) has passed."""
         ...
 
     def reset(self, prior: Mapping[str, float] | None) -> dict:
@@ -77,18 +84,26 @@ def check_prior(where: str, prior: Any) -> dict[str, float] | None:
 
 
 class LocalizerNode:
-    """Serve ``service`` on the bus under ``toploc/<robot_id>/``; ``close()`` (or ``with``)."""
+    """Serve ``service`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
+    (or ``with``)."""
 
-    def __init__(self, session: zenoh.Session, robot_id: str, service: LocalizationService) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        service: LocalizationService,
+        limits: Limits | None = None,
+    ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
         self.service = service
+        self.limits = limits or Limits()
         self._publish_lock = threading.Lock()
         self._last_published: dict[str, Any] | None = None
         self._publisher = session.declare_publisher(self.key(bus.LOCALIZER_BELIEF))
         self._entities: list[Any] = [
             bus.serve(session, self.key(bus.LOCALIZER_BELIEF), self._on_belief),
-            bus.serve(session, self.key(bus.LOCALIZER_LOCALIZE), self._on_localize),
+            bus.serve(session, self.key(bus.LOCALIZER_LOCALIZE), self._on_localize, threaded=True),
             bus.serve(session, self.key(bus.LOCALIZER_RESET), self._on_reset),
             self._publisher,
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
@@ -133,20 +148,33 @@ class LocalizerNode:
     def _on_belief(self, _payload: bytes | None) -> bus.Reply:
         return self._belief_reply(self.service.belief(), publish=False)
 
+    def _decode_request(self, suffix: str, payload: bytes, kind: str) -> dict[str, Any]:
+        limits = self.limits
+        where = self.key(suffix)
+        return bus.decode(
+            where, payload, None, kind, limits.max_request_bytes, limits.max_string_chars
+        )
+
     def _on_localize(self, payload: bytes | None) -> bus.Reply:
-        active = False
+        received_s = time.monotonic()
+        active, deadline_s = False, None
         if payload:
-            request = bus.decode(self.key(bus.LOCALIZER_LOCALIZE), payload)
-            if "active" in request:
-                bus.check_fields(self.key(bus.LOCALIZER_LOCALIZE), request, {"active": bool})
-                active = request["active"]
-        return self._belief_reply(self.service.localize(active), publish=True)
+            where = self.key(bus.LOCALIZER_LOCALIZE)
+            request = self._decode_request(bus.LOCALIZER_LOCALIZE, payload, "localize")
+            optional = {"active": bool, "timeout_s": float}
+            bus.check_fields(where, request, {k: t for k, t in optional.items() if k in request})
+            active = request.get("active", False)
+            if "timeout_s" in request:
+                deadline_s = received_s + request["timeout_s"]
+        return self._belief_reply(self.service.localize(active, deadline_s), publish=True)
 
     def _on_reset(self, payload: bytes | None) -> bus.Reply:
         prior = None
         if payload:
             where = self.key(bus.LOCALIZER_RESET)
-            prior = check_prior(where, bus.decode(where, payload).get("prior"))
+            prior = check_prior(
+                where, self._decode_request(bus.LOCALIZER_RESET, payload, "reset").get("prior")
+            )
         return self._belief_reply(self.service.reset(prior), publish=True)
 
 
@@ -186,7 +214,7 @@ class LocalizerClient:
     def localize(self, active: bool = False) -> dict[str, Any]:
         """Localize now (moving to disambiguate if ``active``); waits up to
         ``localize_timeout_s`` for the new belief."""
-        payload = bus.encode("localize", {"active": active})
+        payload = bus.encode("localize", {"active": active, "timeout_s": self.localize_timeout_s})
         return self._query(bus.LOCALIZER_LOCALIZE, payload, self.localize_timeout_s)
 
     def reset(self, prior: Mapping[str, float] | None = None) -> dict[str, Any]:

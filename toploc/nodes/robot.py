@@ -3,23 +3,28 @@
 
 Keys under ``toploc/<robot_id>/``:
 
-- ``camera/capture`` (queryable): capture now; reply PNG bytes with the JSON attachment
-  ``{schema, kind: "capture", capture_id, stamp, heading_deg, source}``; the same sample is
-  published on ``camera/panorama``. ``heading_deg`` is the odometry heading at capture time.
-- ``base/cmd`` (queryable): ``{turn_deg, forward_m}`` -> ``{turned_deg, moved_m, bumped, odom}``
-  once the move is done (``odom``: the ``base/odom`` fields after the move); a malformed command
-  gets an error reply and the robot does not move.
+- ``camera/capture`` (queryable, at most ``max_captures_per_s``): capture now; reply PNG bytes
+  with the JSON attachment ``{schema, kind: "capture", capture_id, stamp, heading_deg,
+  source}``; the same sample is published on ``camera/panorama``. ``heading_deg`` is the
+  odometry heading at capture time.
+- ``base/cmd`` (queryable): ``{kind: "cmd", turn_deg, forward_m}`` -> ``{turned_deg, moved_m,
+  bumped, odom}`` once the move is done (``odom``: the ``base/odom`` fields after the move); a
+  malformed command, or one beyond the node's :class:`~toploc.limits.Limits`, gets an error
+  reply and the robot does not move. A move still running after ``move_timeout_s`` is stopped
+  and answered with an error.
+- ``base/stop`` (queryable): stop the base now (also during a move); replies ``{stopped: true}``.
 - ``base/odom`` (publication after each move, and queryable): ``{x_m, y_m, heading_deg, stamp}``
   in the odometry frame (REP-103).
 - ``base/bumpers`` (publication after each move): ``{bumped, stamp}``.
 - liveliness token ``alive/robot``.
 
 Calls into the robot are serialized with a lock (one serial line, one camera): an odometry
-query waits for a move in progress.
+query waits for a move in progress. ``base/stop`` does not wait for it.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import itertools
 import math
 import threading
@@ -30,8 +35,10 @@ import cv2
 import numpy as np
 import zenoh
 
+from localizer.panorama_io import MAX_IMAGE_PIXELS, PanoramaError, check_image_header
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 from toploc import bus
+from toploc.limits import Limits, RateLimit
 
 NODE_NAME = "robot"
 CMD_FIELDS: dict[str, bus.FieldType] = {"turn_deg": float, "forward_m": float}
@@ -80,8 +87,13 @@ def encode_png(image: np.ndarray) -> bytes:
     return buffer.tobytes()
 
 
-def decode_png(key_expr: str, data: bytes) -> np.ndarray:
-    """The image in PNG ``data`` received on ``key_expr``; BusMessageError if it is not one."""
+def decode_png(key_expr: str, data: bytes, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
+    """The image in PNG ``data`` received on ``key_expr``; BusMessageError if it is not one, or
+    (read from its header, before decoding) has more than ``max_pixels`` pixels."""
+    try:
+        check_image_header(data, key_expr, max_pixels)
+    except PanoramaError as error:
+        raise bus.BusMessageError(str(error)) from None
     try:
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error:
@@ -93,14 +105,35 @@ def decode_png(key_expr: str, data: bytes) -> np.ndarray:
     return image
 
 
-class RobotNode:
-    """Serve ``robot`` on the bus under ``toploc/<robot_id>/``; ``close()`` (or ``with``)."""
+def check_command(where: str, command: dict[str, Any], limits: Limits) -> None:
+    """Raise BusMessageError (prefixed ``where``) for a ``base/cmd`` beyond ``limits``."""
+    if abs(command["forward_m"]) > limits.max_forward_m:
+        raise bus.BusMessageError(
+            f"{where}: forward_m {command['forward_m']!r} is beyond the limit of "
+            f"{limits.max_forward_m:g} m per command"
+        )
+    if abs(command["turn_deg"]) > limits.max_turn_deg:
+        raise bus.BusMessageError(
+            f"{where}: turn_deg {command['turn_deg']!r} is beyond the limit of "
+            f"{limits.max_turn_deg:g}° per command"
+        )
 
-    def __init__(self, session: zenoh.Session, robot_id: str, robot: Robot) -> None:
+
+class RobotNode:
+    """Serve ``robot`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
+    (or ``with``)."""
+
+    def __init__(
+        self, session: zenoh.Session, robot_id: str, robot: Robot, limits: Limits | None = None
+    ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
         self.robot = robot
+        self.limits = limits or Limits()
         self._lock = threading.Lock()
+        self._captures = RateLimit(self.limits.max_captures_per_s)
+        # One thread runs the moves, so that a move past its timeout can be stopped and answered.
+        self._mover = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="base-move")
         self._capture_ids = itertools.count(1)
         k = self.key
         self._panorama = session.declare_publisher(k(bus.CAMERA_PANORAMA))
@@ -109,6 +142,7 @@ class RobotNode:
         self._entities: list[Any] = [
             bus.serve(session, k(bus.CAMERA_CAPTURE), self._on_capture),
             bus.serve(session, k(bus.BASE_CMD), self._on_cmd),
+            bus.serve(session, k(bus.BASE_STOP), self._on_stop),
             bus.serve(session, k(bus.BASE_ODOM), self._on_odom),
             self._panorama,
             self._odom,
@@ -121,8 +155,10 @@ class RobotNode:
         return bus.key(self.robot_id, suffix)
 
     def close(self) -> None:
-        """Undeclare everything (the session stays open)."""
+        """Undeclare everything and stop the base (the session stays open)."""
         bus.undeclare_all(self._entities)
+        self.robot.stop()
+        self._mover.shutdown(wait=False, cancel_futures=True)
 
     def __enter__(self) -> RobotNode:
         return self
@@ -131,6 +167,10 @@ class RobotNode:
         self.close()
 
     def _on_capture(self, _payload: bytes | None) -> bus.Reply:
+        if not self._captures.allow():
+            raise bus.BusMessageError(
+                f"rate limited: at most {self.limits.max_captures_per_s} captures per second"
+            )
         with self._lock:
             capture = self.robot.capture()
             heading_rad = self.robot.odometry().heading_rad
@@ -144,11 +184,26 @@ class RobotNode:
         self._panorama.put(reply.payload, attachment=reply.attachment)
         return reply
 
-    def _on_cmd(self, payload: bytes | None) -> bus.Reply:
-        command = bus.decode(self.key(bus.BASE_CMD), payload, CMD_FIELDS)
+    def _move(self, turn_deg: float, forward_m: float) -> tuple[MoveResult, Odometry]:
         with self._lock:
-            result = self.robot.move(math.radians(command["turn_deg"]), command["forward_m"])
-            odometry = self.robot.odometry()
+            return self.robot.move(math.radians(turn_deg), forward_m), self.robot.odometry()
+
+    def _on_cmd(self, payload: bytes | None) -> bus.Reply:
+        where = self.key(bus.BASE_CMD)
+        limits = self.limits
+        command = bus.decode(
+            where, payload, CMD_FIELDS, "cmd", limits.max_request_bytes, limits.max_string_chars
+        )
+        check_command(where, command, self.limits)
+        running = self._mover.submit(self._move, command["turn_deg"], command["forward_m"])
+        try:
+            result, odometry = running.result(timeout=self.limits.move_timeout_s)
+        except concurrent.futures.TimeoutError:
+            self.robot.stop()
+            raise TimeoutError(
+                f"{where}: the move did not finish within {self.limits.move_timeout_s:g} s; "
+                "the base was stopped"
+            ) from None
         odom = odometry_fields(odometry, time.time())
         self._odom.put(bus.encode("odom", odom))
         self._bumpers.put(bus.encode("bumpers", {"bumped": result.bumped, "stamp": odom["stamp"]}))
@@ -159,6 +214,10 @@ class RobotNode:
             "odom": odom,
         }
         return bus.Reply(bus.encode("move", move))
+
+    def _on_stop(self, _payload: bytes | None) -> bus.Reply:
+        self.robot.stop()
+        return bus.Reply(bus.encode("stopped", {"stopped": True}))
 
     def _on_odom(self, _payload: bytes | None) -> bus.Reply:
         with self._lock:
@@ -232,6 +291,11 @@ class RemoteRobot:
         bus.check_fields(f"{key_expr} (odom)", reply["odom"], ODOM_FIELDS)
         self._remember(reply["odom"])
         return MoveResult(math.radians(reply["turned_deg"]), reply["moved_m"], reply["bumped"])
+
+    def stop(self) -> None:
+        """Query ``base/stop``: the node stops the base at once, also during a move."""
+        key_expr = bus.key(self.robot_id, bus.BASE_STOP)
+        bus.request(self.session, key_expr, bus.encode("stop", {}), self.timeout_s)
 
     def odometry(self) -> Odometry:
         """The newest odometry seen (``base/odom`` publications and move replies), or a

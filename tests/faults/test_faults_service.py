@@ -1,0 +1,265 @@
+"""Hostile and unlucky bus clients (issue 11): each test is one of its reproductions, run on real
+Zenoh sessions on 127.0.0.1. Before the fix each of them failed (a NaN belief, a 10 km drive,
+abandoned queries run in turn, ...)."""
+
+import math
+import re
+import threading
+import time
+
+import numpy as np
+import pytest
+from bus_helpers import ROBOT_ID, wait_for
+
+from localizer.belief import BeliefFilter
+from localizer.localizer import LoadedMap, Localizer
+from localizer.robot_protocol import Capture, MoveResult, Odometry
+from mapdb.loading import load_snapshot
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.world import Pose2D
+from robot.worlds import make_world
+from toploc import bus
+from toploc.limits import Limits, RateLimit, load_limits
+from toploc.nodes.localizer import LocalizerClient, LocalizerNode
+from toploc.nodes.robot import RemoteRobot, RobotNode
+from toploc.runner import LocalizationDroppedError, LocalizationRunner
+
+
+class SlowRobot:
+    """A robot whose moves last until :meth:`stop` (or 10 s); records what it was asked."""
+
+    def __init__(self) -> None:
+        self.moves: list[tuple[float, float]] = []
+        self.stopped = threading.Event()
+        self.captures = 0
+
+    def capture(self) -> Capture:
+        self.captures += 1
+        return Capture(np.zeros((8, 32), np.uint8), 0.0, "slow")
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self.moves.append((turn_rad, forward_m))
+        self.stopped.wait(10.0)
+        return MoveResult(turn_rad, 0.0, False)
+
+    def odometry(self) -> Odometry:
+        return Odometry(0.0, 0.0, 0.0)
+
+    def stop(self) -> None:
+        self.stopped.set()
+
+
+def command(zbus, payload: bytes, timeout_s: float = 3.0):
+    return bus.request(zbus.client, bus.key(ROBOT_ID, bus.BASE_CMD), payload, timeout_s)
+
+
+@pytest.fixture
+def slow_robot(zbus):
+    robot = SlowRobot()
+    with RobotNode(zbus.server, ROBOT_ID, robot, Limits(move_timeout_s=0.5, max_captures_per_s=3)):
+        zbus.wait_alive("robot")
+        yield zbus, robot
+
+
+# --- the belief ------------------------------------------------------------------------------
+
+
+def test_huge_prior_weights_give_a_finite_belief():
+    beliefs = BeliefFilter(["kitchen", "office_a"])
+    beliefs.reset({"kitchen": 1e308, "office_a": 1e308})
+    assert beliefs.as_dict() == {"kitchen": 0.5, "office_a": 0.5}
+
+
+@pytest.fixture(scope="module")
+def building(building_map) -> LoadedMap:
+    return LoadedMap.from_snapshot(load_snapshot(building_map[0]))
+
+
+def robot_in_kitchen() -> SimulatedRobot:
+    world = make_world("building")
+    pose = world.building_pose("kitchen", Pose2D(2.0, 3.0, math.radians(30.0)))
+    return SimulatedRobot(world, pose, camera=PanoramaCamera(512, 96), seed=9)
+
+
+def test_a_reset_with_huge_weights_over_the_bus_leaves_the_service_usable(zbus, building):
+    runner = LocalizationRunner(Localizer(building), robot_in_kitchen())
+    with LocalizerNode(zbus.server, ROBOT_ID, runner):
+        zbus.wait_alive("localizer")
+        client = LocalizerClient(zbus.client, ROBOT_ID, timeout_s=5.0, localize_timeout_s=30.0)
+        reset = client.reset({"kitchen": 1e308, "office_a": 1e308})
+        assert reset["rooms"]["kitchen"] == pytest.approx(0.5)
+        assert all(math.isfinite(p) for p in client.belief()["rooms"].values())
+        assert client.localize()["best_place"]["room"] == "kitchen"
+
+
+def test_a_prior_naming_a_room_with_a_huge_name_is_refused_briefly(zbus, building):
+    runner = LocalizationRunner(Localizer(building), robot_in_kitchen())
+    with LocalizerNode(zbus.server, ROBOT_ID, runner):
+        zbus.wait_alive("localizer")
+        client = LocalizerClient(zbus.client, ROBOT_ID, timeout_s=5.0)
+        with pytest.raises(bus.BusReplyError, match="10000 characters; at most 256") as error:
+            client.reset({"k" * 10_000: 1.0})
+    assert len(str(error.value)) < 300
+
+
+# --- base/cmd --------------------------------------------------------------------------------
+
+
+def test_a_drive_beyond_the_limit_is_refused_and_the_robot_does_not_move(slow_robot):
+    zbus, robot = slow_robot
+    with pytest.raises(bus.BusReplyError, match="forward_m 10000 is beyond the limit of 5 m"):
+        command(zbus, bus.encode("cmd", {"turn_deg": 0.0, "forward_m": 10000}))
+    assert robot.moves == []
+
+
+def test_a_huge_turn_is_refused(slow_robot):
+    zbus, robot = slow_robot
+    with pytest.raises(bus.BusReplyError, match=r"turn_deg 1000000\.0 is beyond the limit of 360°"):
+        command(zbus, bus.encode("cmd", {"turn_deg": 1e6, "forward_m": 0.0}))
+    assert robot.moves == []
+
+
+def test_a_message_of_another_kind_is_not_taken_as_a_command(slow_robot):
+    zbus, robot = slow_robot
+    with pytest.raises(bus.BusReplyError, match="message kind 'reset', expected 'cmd'"):
+        command(zbus, bus.encode("reset", {"turn_deg": 10.0, "forward_m": 1.0}))
+    assert robot.moves == []
+
+
+def test_an_oversized_command_is_refused_before_parsing(slow_robot):
+    zbus, robot = slow_robot
+    padding = "x" * 70_000
+    payload = bus.encode("cmd", {"turn_deg": 0.0, "forward_m": 1.0, "note": padding})
+    with pytest.raises(bus.BusReplyError, match="bytes; at most 65536 are accepted"):
+        command(zbus, payload)
+    assert robot.moves == []
+
+
+def test_a_move_past_its_timeout_is_stopped_and_answered(slow_robot):
+    zbus, robot = slow_robot
+    start = time.monotonic()
+    with pytest.raises(bus.BusReplyError, match=r"did not finish within 0\.5 s; the base was"):
+        command(zbus, bus.encode("cmd", {"turn_deg": 0.0, "forward_m": 1.0}))
+    assert robot.stopped.is_set()
+    assert time.monotonic() - start < 5.0  # the move itself would have lasted 10 s
+
+
+def test_base_stop_ends_a_move_in_progress(slow_robot):
+    zbus, robot = slow_robot
+    remote = RemoteRobot(zbus.client, ROBOT_ID, timeout_s=2.0, move_timeout_s=5.0)
+    results: list[MoveResult] = []
+    mover = threading.Thread(target=lambda: results.append(remote.move(0.0, 1.0)))
+    mover.start()
+    assert wait_for(lambda: bool(robot.moves))
+    remote.stop()
+    mover.join(5.0)
+    assert robot.stopped.is_set() and results == [MoveResult(0.0, 0.0, False)]
+    remote.close()
+
+
+def test_captures_beyond_the_rate_limit_are_refused(slow_robot):
+    zbus, robot = slow_robot
+    remote = RemoteRobot(zbus.client, ROBOT_ID, timeout_s=2.0)
+    for _ in range(3):
+        remote.capture()
+    with pytest.raises(bus.BusReplyError, match="rate limited: at most 3 captures per second"):
+        remote.capture()
+    assert robot.captures == 3
+    remote.close()
+
+
+def test_the_rate_limit_admits_again_after_its_window():
+    limit = RateLimit(2, window_s=1.0)
+    assert [limit.allow(t) for t in (0.0, 0.1, 0.2, 1.05, 1.15)] == [True, True, False, True, True]
+
+
+# --- localizer/localize ----------------------------------------------------------------------
+
+
+class GatedRobot:
+    """The kitchen robot, whose captures wait for ``gate`` and are counted."""
+
+    def __init__(self) -> None:
+        self.robot = robot_in_kitchen()
+        self.gate = threading.Event()
+        self.captures = 0
+
+    def capture(self) -> Capture:
+        self.captures += 1
+        self.gate.wait(10.0)
+        return self.robot.capture()
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self) -> Odometry:
+        return self.robot.odometry()
+
+    def stop(self) -> None:
+        self.robot.stop()
+
+
+def test_localize_queries_whose_clients_gave_up_are_dropped_unrun(zbus, building):
+    robot = GatedRobot()
+    runner = LocalizationRunner(Localizer(building), robot)
+    with LocalizerNode(zbus.server, ROBOT_ID, runner):
+        zbus.wait_alive("localizer")
+        patient = LocalizerClient(zbus.client, ROBOT_ID, localize_timeout_s=30.0)
+        first = threading.Thread(target=patient.localize)
+        first.start()
+        assert wait_for(lambda: robot.captures == 1)
+        hasty = LocalizerClient(zbus.client, ROBOT_ID, localize_timeout_s=0.3)
+        for _ in range(5):
+            with pytest.raises((bus.BusTimeout, bus.BusReplyError)):  # whichever ends first
+                hasty.localize()
+        robot.gate.set()
+        first.join(10.0)
+        start = time.monotonic()
+        patient.localize()
+        fresh_s = time.monotonic() - start
+    assert robot.captures == 2  # the first and the fresh one; the five abandoned never ran
+    assert fresh_s < 5.0
+
+
+def test_localizations_beyond_the_queue_bound_are_refused_at_once(building):
+    robot = GatedRobot()
+    runner = LocalizationRunner(Localizer(building), robot, max_pending=1)
+    first = threading.Thread(target=runner.localize, args=(False,))
+    first.start()
+    assert wait_for(lambda: robot.captures == 1)
+    waiting = threading.Thread(target=runner.localize, args=(False, time.monotonic() + 10.0))
+    waiting.start()
+    assert wait_for(lambda: runner._pending == 1)
+    with pytest.raises(LocalizationDroppedError, match="1 localizations are already waiting"):
+        runner.localize(False)
+    robot.gate.set()
+    first.join(10.0)
+    waiting.join(10.0)
+
+
+# --- limits files ----------------------------------------------------------------------------
+
+
+def test_a_limits_file_overrides_some_bounds(tmp_path):
+    path = tmp_path / "limits.toml"
+    path.write_text("max_forward_m = 2.0\nmove_timeout_s = 30\n")
+    assert load_limits(path) == Limits(max_forward_m=2.0, move_timeout_s=30.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("max_forward_m = -1\n", "max_forward_m must be finite and > 0"),
+        ("max_speed = 1\n", "unknown limit(s) ['max_speed']"),
+        ("max_forward_m = 'far'\n", "max_forward_m must be a number"),
+        ("max_pending_localizations = 2.5\n", "must be an integer"),
+        ("max_forward_m = \n", "cannot read the limits"),
+    ],
+)
+def test_a_bad_limits_file_is_named_in_one_line(tmp_path, text, message):
+    path = tmp_path / "limits.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=re.escape(message)) as err:
+        load_limits(path)
+    assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
