@@ -82,6 +82,7 @@ class LocalizerNode:
     def __init__(self, session: zenoh.Session, robot_id: str, service: LocalizationService) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.service = service
         self._publish_lock = threading.Lock()
         self._last_published: dict[str, Any] | None = None

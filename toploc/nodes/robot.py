@@ -99,6 +99,7 @@ class RobotNode:
     def __init__(self, session: zenoh.Session, robot_id: str, robot: Robot) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.robot = robot
         self._lock = threading.Lock()
         self._capture_ids = itertools.count(1)
