@@ -68,6 +68,11 @@ def file_settings(config: zenoh.Config, mode: str | None = None) -> FileSettings
     )
 
 
+def _first_given(*choices: Sequence[str] | None) -> Sequence[str]:
+    """The first choice that is not ``None`` (an empty list is a choice: listen nowhere)."""
+    return next(choice for choice in choices if choice is not None)
+
+
 def bus_config(
     robot_id: str,
     zenoh_file: Path | None = None,
@@ -84,7 +89,7 @@ def bus_config(
     return BusConfig(
         robot_id=robot_id,
         mode=mode or found.mode or "peer",
-        listen=tuple(listen if listen is not None else found.listen or (DEFAULT_ENDPOINT,)),
+        listen=tuple(_first_given(listen, found.listen, (DEFAULT_ENDPOINT,))),
         connect=tuple(connect if connect is not None else found.connect or ()),
         scouting_multicast=bool(found.scouting_multicast),
         zenoh_file=zenoh_file,
