@@ -13,8 +13,10 @@ queryable delays only later queries on that same key; other queryables keep answ
 
 Querying (:func:`request`): ``Session.get`` returns at once with no reply when no queryable
 matches, and with a ``ReplyError`` whose payload is ``b"Timeout"`` when one matches but does not
-answer in time; both raise :class:`BusTimeout`. A callback that raises gets its query dropped (no
-reply), so :func:`serve` turns every exception into an error reply instead.
+answer in time; both raise :class:`BusTimeout`. A query that the remote's ``access_control``
+denies also returns at once with no reply (measured: no error, no ``Timeout``). A callback that
+raises gets its query dropped (no reply), so :func:`serve` turns every exception into an error
+reply instead.
 
 Sessions: close every session (``with open_session(cfg) as session:``). With Python callbacks
 declared, an unclosed session keeps the interpreter from exiting (the callback threads are not
