@@ -13,14 +13,26 @@ queryable delays only later queries on that same key; other queryables keep answ
 
 Querying (:func:`request`): ``Session.get`` returns at once with no reply when no queryable
 matches, and with a ``ReplyError`` whose payload is ``b"Timeout"`` when one matches but does not
-answer in time; both raise :class:`BusTimeout`. A callback that raises gets its query dropped (no
-reply), so :func:`serve` turns every exception into an error reply instead.
+answer in time; both raise :class:`BusTimeout`. A query that the remote's ``access_control``
+denies also returns at once with no reply (measured: no error, no ``Timeout``). A callback that
+raises gets its query dropped (no reply), so :func:`serve` turns every exception into an error
+reply instead.
 
 Sessions: close every session (``with open_session(cfg) as session:``). With Python callbacks
 declared, an unclosed session keeps the interpreter from exiting (the callback threads are not
 daemons). Opening a peer session that connects to another peer can take up to
 ``scouting/delay`` (500 ms by default): that wait is what lets a query made right after
 ``open`` see the remote queryables (with the delay set to 0 it saw none, 0 of 10 tries).
+
+A user's own Zenoh configuration file (``BusConfig.zenoh_file``, JSON5) brings Zenoh's
+authentication (``transport/auth/usrpwd``), access control (``access_control``) and TLS;
+:mod:`toploc.bus_config` decides which of toploc's options are written over it.
+
+One node per role and robot id (:func:`ensure_unique_node`): before a node declares anything it
+asks the bus for its own liveliness token; a liveliness query is answered from the declarations
+the session already holds (measured: under 1 ms, whether or not a token exists). The check is
+not atomic: two nodes starting within the same moment, or two sessions that connect only after
+both checked (``connect`` retries, a peer that appears later), both start.
 """
 
 from __future__ import annotations
@@ -28,10 +40,13 @@ from __future__ import annotations
 import json
 import logging
 import math
+import re
+import socket
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -42,7 +57,9 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_TIMEOUT_S = 5.0
 EARLY_END = 0.9
 """A query that ends without a reply before this fraction of its timeout was not timed out: no
-queryable matched, or the one that did went away (:func:`request`)."""
+queryable matched, the access control denied it, or the node asked went away (:func:`request`)."""
+UNIQUE_CHECK_TIMEOUT_S = 1.0
+FALLBACK_ROBOT_ID = "robot"
 MODES = ("peer", "client", "router")
 
 # Key suffixes under toploc/<robot_id>/ (see the README's bus table).
@@ -77,6 +94,14 @@ class BusTimeout(BusError, TimeoutError):  # noqa: N818 (the name the contract u
     """Nobody answered a query on a key in time."""
 
 
+class ZenohConfigError(BusError, ValueError):
+    """A Zenoh configuration file that cannot be read (names the file and Zenoh's message)."""
+
+
+class BusIdInUse(BusError):  # noqa: N818 (reads as the condition)
+    """A node of the same role already runs on the bus for this robot id."""
+
+
 class BusReplyError(BusError):
     """The node answered a query with an error reply; ``message`` is its text."""
 
@@ -97,6 +122,15 @@ def check_robot_id(robot_id: str) -> str:
     return robot_id
 
 
+def default_robot_id(hostname: str | None = None) -> str:
+    """This machine's robot id: its host name (``socket.gethostname()``) up to the first dot,
+    lower case, every character a key chunk forbids (``/ * $ ? #``, spaces) replaced by ``-``;
+    ``"robot"`` if nothing is left. The service and the clients of one machine agree on it."""
+    name = (socket.gethostname() if hostname is None else hostname).split(".")[0].lower()
+    name = re.sub(r"[/*$?#\s]+", "-", name).strip("-")
+    return name or FALLBACK_ROBOT_ID
+
+
 def key(robot_id: str, suffix: str) -> str:
     """The key expression ``toploc/<robot_id>/<suffix>``, e.g. ``key("r1", LOCALIZER_BELIEF)``."""
     if not suffix or suffix.startswith("/") or suffix.endswith("/"):
@@ -109,19 +143,40 @@ def alive_key(robot_id: str, node: str) -> str:
     return key(robot_id, f"alive/{check_robot_id(node)}")
 
 
+def _one_line(zenoh_message: str) -> str:
+    """Zenoh's error text on one line, without the Rust source location it ends with."""
+    text = re.sub(r"\s+at \S+\.rs:\d+\.?\s*$", "", zenoh_message.strip())
+    return " ".join(text.split())
+
+
+def load_zenoh_file(path: Path) -> zenoh.Config:
+    """Read a Zenoh configuration file (JSON5, ``zenoh.Config.from_file``); raises
+    :class:`ZenohConfigError` naming the file and Zenoh's message on one line."""
+    try:
+        return zenoh.Config.from_file(str(path))
+    except zenoh.ZError as error:
+        raise ZenohConfigError(f"Zenoh configuration {path}: {_one_line(str(error))}") from None
+
+
 @dataclass(frozen=True)
 class BusConfig:
-    """Where a session listens and connects. Defaults: a peer on 127.0.0.1:7447, no multicast.
+    """Where a session listens and connects. Defaults: a peer on 127.0.0.1:7447, no multicast,
+    the robot id of this machine (:func:`default_robot_id`).
 
     ``listen``/``connect`` are Zenoh endpoints (``tcp/host:port``, ``udp/...``, ...). A client
     application usually listens nowhere (``listen=()``) and connects to the service.
+    ``zenoh_file`` is a full Zenoh configuration (JSON5: authentication, access control, TLS)
+    that the session starts from; mode, endpoints and multicast scouting are always written
+    over it (:func:`toploc.bus_config.bus_config` takes them from the file where the user gave
+    no option).
     """
 
-    robot_id: str = "robot"
+    robot_id: str = field(default_factory=default_robot_id)
     mode: str = "peer"
     listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
     connect: tuple[str, ...] = ()
     scouting_multicast: bool = False
+    zenoh_file: Path | None = None
 
     def __post_init__(self) -> None:
         check_robot_id(self.robot_id)
@@ -141,8 +196,9 @@ class BusConfig:
             raise ValueError("a session in client mode needs at least one connect endpoint")
 
     def to_zenoh(self) -> zenoh.Config:
-        """The ``zenoh.Config`` (built with ``insert_json5``)."""
-        config = zenoh.Config()
+        """The ``zenoh.Config``: ``zenoh_file`` (or Zenoh's defaults), then this config's mode,
+        endpoints and multicast scouting written over it with ``insert_json5``."""
+        config = zenoh.Config() if self.zenoh_file is None else load_zenoh_file(self.zenoh_file)
         config.insert_json5("mode", json.dumps(self.mode))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
@@ -153,13 +209,36 @@ class BusConfig:
 def open_session(cfg: BusConfig) -> zenoh.Session:
     """Open a Zenoh session for ``cfg``; raises :class:`BusError` naming the endpoints on failure
     (e.g. the listen port is already in use). Close it with ``session.close()`` or ``with``."""
+    config = cfg.to_zenoh()
     try:
-        return zenoh.open(cfg.to_zenoh())
+        return zenoh.open(config)
     except zenoh.ZError as error:
+        source = "" if cfg.zenoh_file is None else f", configuration {cfg.zenoh_file}"
         raise BusError(
             f"cannot open a Zenoh {cfg.mode} session (listen {list(cfg.listen)}, "
-            f"connect {list(cfg.connect)}): {error}"
+            f"connect {list(cfg.connect)}{source}): {_one_line(str(error))}"
         ) from error
+
+
+def ensure_unique_node(
+    session: zenoh.Session,
+    robot_id: str,
+    node: str,
+    timeout_s: float = UNIQUE_CHECK_TIMEOUT_S,
+) -> None:
+    """Raise :class:`BusIdInUse` if the liveliness token of ``node`` for ``robot_id`` is already
+    on the bus (waits at most ``timeout_s`` seconds; see the module docstring for the race).
+    Call it before the node declares anything."""
+    token_key = alive_key(robot_id, node)
+    try:
+        replies = list(session.liveliness().get(token_key, timeout=timeout_s))
+    except zenoh.ZError as error:
+        raise BusError(f"{token_key}: liveliness query failed: {error}") from error
+    if any(reply.ok is not None for reply in replies):
+        raise BusIdInUse(
+            f"robot id {robot_id!r} already has a {node} node on the bus ({token_key}); "
+            "choose another --robot-id"
+        )
 
 
 # --- codec -----------------------------------------------------------------------------------
@@ -385,10 +464,11 @@ def request(
         errors.append(_error_text(key_expr, data))
     if not errors or errors == ["Timeout"]:
         hint = (
-            "is the node running, with this robot id?"
+            "is the node running, with this robot id, and does the bus's access control "
+            "allow this key?"
             if connected(session)
             else "this session reaches no other Zenoh node: is anything listening at the "
-            "connect endpoints?"
+            "connect endpoints, and does it accept this session's credentials?"
         )
         if waited_s < EARLY_END * timeout_s:
             raise BusTimeout(

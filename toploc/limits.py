@@ -29,8 +29,9 @@ class Limits:
     (``Robot.stop``) and answered with an error. ``max_request_bytes``: the largest JSON request
     payload. ``max_string_chars``: the longest string in a request (room names of a prior).
     ``max_captures_per_s``: ``camera/capture`` answers at most this many captures in any one
-    second (a 360° camera's video rate); more get an error reply. ``max_pending_localizations``: ``localizer/localize``
-    queries waiting for their turn beyond this are refused at once. ``max_image_pixels``: the
+    second (a 360° camera's video rate); more get an error reply.
+    ``max_pending_localizations``: ``localizer/localize`` queries waiting for their turn beyond
+    this are refused at once. ``max_image_pixels``: the
     largest image (width x height) decoded, checked in its header first.
     """
 

@@ -379,7 +379,7 @@ def test_belief_cli_with_nothing_listening_says_so():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     done = CliRunner().invoke(main, ["belief", "--connect", endpoint, "--timeout", "0.2"])
     assert done.exit_code == 1
-    assert "toploc/robot/localizer/belief: no reply" in done.output
+    assert f"toploc/{bus.default_robot_id()}/localizer/belief: no reply" in done.output
     assert "reaches no other Zenoh node" in done.output
 
 

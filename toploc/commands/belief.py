@@ -1,19 +1,24 @@
 """``toploc belief``: ask a running toploc service (over Zenoh) which room the robot is in.
 
-Opens a peer session that listens nowhere and connects to ``--connect`` (default
-``tcp/127.0.0.1:7447``), then queries ``toploc/<robot-id>/localizer/...``. ``--reset`` resets
-the belief first, ``--localize`` (or ``--active``) localizes now, then the belief is printed.
-Exit status 1 with ``Error: ...`` if no service answers or the service reports an error.
+Opens a session that listens nowhere and connects to ``--connect`` (default: the
+``--zenoh-config`` file's endpoints, else ``tcp/127.0.0.1:7447``), then queries
+``toploc/<robot-id>/localizer/...`` (robot id: this machine's host name unless ``--robot-id``).
+``--reset`` resets the belief first, ``--localize`` (or ``--active``) localizes now, then the
+belief is printed. Exit status 1 with ``Error: ...`` if no service answers or the service
+reports an error.
 """
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import click
 
 from toploc import bus
+from toploc.bus_config import client_bus_config
+from toploc.commands.options import robot_id_option, zenoh_config_option
 
 
 def format_belief(belief: dict[str, Any]) -> str:
@@ -36,15 +41,15 @@ def format_belief(belief: dict[str, Any]) -> str:
 
 
 @click.command("belief")
-@click.option("--robot-id", default="robot", show_default=True, help="Robot id in the keys.")
+@robot_id_option
 @click.option(
     "--connect",
     "endpoints",
     multiple=True,
-    default=(bus.DEFAULT_ENDPOINT,),
-    show_default=True,
-    help="Zenoh endpoint of the service (repeatable).",
+    help=f"Zenoh endpoint of the service (repeatable; default: the --zenoh-config file's, else "
+    f"{bus.DEFAULT_ENDPOINT}).",
 )
+@zenoh_config_option
 @click.option("--localize", is_flag=True, help="Localize now before printing the belief.")
 @click.option("--active", is_flag=True, help="Localize and allow moving to disambiguate.")
 @click.option("--reset", is_flag=True, help="Reset to a uniform belief first.")
@@ -60,6 +65,7 @@ def format_belief(belief: dict[str, Any]) -> str:
 def belief(
     robot_id: str,
     endpoints: tuple[str, ...],
+    zenoh_file: Path | None,
     localize: bool,
     active: bool,
     reset: bool,
@@ -70,7 +76,9 @@ def belief(
     from toploc.nodes.localizer import LOCALIZE_TIMEOUT_S, LocalizerClient
 
     try:
-        cfg = bus.BusConfig(robot_id=robot_id, listen=(), connect=endpoints)
+        cfg = client_bus_config(robot_id, zenoh_file, endpoints or None)
+    except bus.ZenohConfigError as error:
+        raise click.ClickException(str(error)) from None
     except ValueError as error:
         raise click.BadParameter(str(error)) from error
     try:

@@ -16,6 +16,7 @@ import click
 from localizer.policy import POLICIES
 from robot.worlds import make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError, open_session
+from toploc.commands.options import robot_id_option, warn_if_exposed
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.nodes.localizer import LocalizerClient
 from toploc.service import start_service
@@ -36,7 +37,7 @@ def format_belief(belief: dict[str, Any], t0: float, top: int = 3) -> str:
 @click.option("--seed", type=int, default=1, show_default=True, help="Seeds the kidnapped pose.")
 @click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
 @click.option("--endpoint", default=DEFAULT_ENDPOINT, show_default=True)
-@click.option("--robot-id", default="robot", show_default=True)
+@robot_id_option
 def demo(room: str, seed: int, policy: str, endpoint: str, robot_id: str) -> None:
     """Kidnap the simulated robot into a look-alike office and watch toploc find out which."""
     click.echo(f"1/3 map of the rendered {WORLD!r} world (made once, then reused)")
@@ -45,6 +46,7 @@ def demo(room: str, seed: int, policy: str, endpoint: str, robot_id: str) -> Non
     world = make_world(WORLD)
     service_config = BusConfig(robot_id=robot_id, listen=(endpoint,))
     client_config = BusConfig(robot_id=robot_id, listen=(), connect=(endpoint,))
+    warn_if_exposed(service_config)
     robot = kidnapped_robot(world, room, seed, db_path)
     try:
         with start_service(db_path, service_config, robot, policy):

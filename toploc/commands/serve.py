@@ -14,8 +14,14 @@ from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
 from robot.worlds import WORLD_NAMES, make_world
-from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
-from toploc.commands.options import camera_option
+from toploc.bus import DEFAULT_ENDPOINT, BusError
+from toploc.bus_config import bus_config
+from toploc.commands.options import (
+    camera_option,
+    robot_id_option,
+    warn_if_exposed,
+    zenoh_config_option,
+)
 from toploc.limits import Limits, load_limits
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.service import start_service
@@ -29,10 +35,25 @@ from toploc.service import start_service
     default=None,
     help="The map (default: the --sim-world's map from the cache, made on first use).",
 )
-@click.option("--robot-id", default="robot", show_default=True)
-@click.option("--listen", multiple=True, default=(DEFAULT_ENDPOINT,), show_default=True)
-@click.option("--connect", multiple=True, help="Zenoh endpoints to connect to (repeatable).")
-@click.option("--mode", type=click.Choice(["peer", "router"]), default="peer", show_default=True)
+@robot_id_option
+@click.option(
+    "--listen",
+    multiple=True,
+    help=f"Zenoh endpoint to listen on (repeatable; default: the --zenoh-config file's, else "
+    f"{DEFAULT_ENDPOINT}).",
+)
+@click.option(
+    "--connect",
+    multiple=True,
+    help="Zenoh endpoint to connect to (repeatable; default: the --zenoh-config file's).",
+)
+@click.option(
+    "--mode",
+    type=click.Choice(["peer", "router"]),
+    default=None,
+    help="Zenoh mode (default: the --zenoh-config file's, else peer).",
+)
+@zenoh_config_option
 @click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
 @click.option(
     "--sim-world",
@@ -59,7 +80,8 @@ def serve(
     robot_id: str,
     listen: tuple[str, ...],
     connect: tuple[str, ...],
-    mode: str,
+    mode: str | None,
+    zenoh_file: Path | None,
     policy: str,
     sim_world: str,
     sim_room: str,
@@ -73,11 +95,16 @@ def serve(
         limits = Limits() if limits_path is None else load_limits(limits_path)
     except ValueError as error:
         raise click.ClickException(f"--limits: {error}") from error
+    try:
+        config = bus_config(robot_id, zenoh_file, mode, listen or None, connect or None)
+    except ValueError as error:
+        raise click.ClickException(str(error)) from None
+    click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
+    warn_if_exposed(config)
     db = db_path or ensure_world_map(sim_world)
     robot = None
     if not no_sim:
         robot = kidnapped_robot(make_world(sim_world), sim_room, seed, db)
-    config = BusConfig(robot_id=robot_id, mode=mode, listen=listen, connect=connect)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -86,8 +113,9 @@ def serve(
         with start_service(db, config, robot, policy, localizer_config, limits):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
             click.echo(
-                f"serving {db} as toploc/{robot_id}/** ({mode}, listen {list(listen)}, "
-                f"connect {list(connect)}); robot: {where}. Ctrl-C stops."
+                f"serving {db} as toploc/{robot_id}/** ({config.mode}, listen "
+                f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}. "
+                "Ctrl-C stops."
             )
             stop.wait()
     except BusError as error:

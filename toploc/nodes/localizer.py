@@ -96,6 +96,7 @@ class LocalizerNode:
     ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.service = service
         self.limits = limits or Limits()
         self._publish_lock = threading.Lock()

@@ -31,6 +31,7 @@ class MapNode:
     def __init__(self, session: zenoh.Session, robot_id: str, db_path: Path | str) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.db_path = Path(db_path)
         k = self.key
         self._entities: list[Any] = [

@@ -128,6 +128,7 @@ class RobotNode:
     ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.robot = robot
         self.limits = limits or Limits()
         self._lock = threading.Lock()
