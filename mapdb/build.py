@@ -34,7 +34,7 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import ManifestEntry, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
-from mapdb.workers import spawn_process_pool
+from mapdb.workers import spawn_process_pool, stop_workers
 
 Extractor = Callable[[Path], list[Fingerprint]]
 
@@ -175,7 +175,10 @@ def _extract_parallel(
                 yield job, result
         finished = True
     finally:
-        pool.shutdown(wait=finished, cancel_futures=True)
+        if finished:
+            pool.shutdown(wait=True)
+        else:  # interrupted, or a fault: the workers' results are no longer wanted
+            stop_workers(pool)
 
 
 def build_map(

@@ -2,7 +2,7 @@
 
 Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` and exit status
 1. ``map build`` exits 1 if any image failed (the others are imported) and 130 if interrupted
-(the map stays consistent; re-running completes it). Also runnable as
+by Ctrl-C or ``SIGTERM`` (the map stays consistent; re-running completes it). Also runnable as
 ``python -m toploc.commands.map``.
 
 Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.panorama_io`` +
@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -59,6 +61,26 @@ def _map_errors() -> Iterator[None]:
         yield
     except MapDatabaseError as error:
         raise click.ClickException(str(error)) from error
+
+
+def _raise_interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, ``SIGTERM`` stops the command as Ctrl-C does (a KeyboardInterrupt: the
+    build ends cleanly, its workers stopped, exit 130). Left alone if a handler is set already
+    (e.g. by the CLI) or outside the main thread."""
+    in_main = threading.current_thread() is threading.main_thread()
+    if not in_main or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _log_outcome(outcome: Outcome, verbose: bool) -> None:
@@ -139,7 +161,7 @@ def build_command(
     An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
     """
     presets = parse_detectors(detectors)
-    with _map_errors():
+    with _sigterm_as_interrupt(), _map_errors():
         entries = read_manifest(dataset)
         edges = read_edges(dataset)
         with MapDatabase.open(db_path) as map_db:
