@@ -31,7 +31,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from mapdb.database import MapDatabase
-from mapdb.dataset import ManifestEntry, sha256_file
+from mapdb.dataset import ManifestEntry, NotARegularFileError, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
 from mapdb.workers import spawn_process_pool, stop_workers
@@ -104,12 +104,18 @@ def _error_text(error: BaseException) -> str:
     return text if isinstance(error, ValueError | OSError) else f"{type(error).__name__}: {text}"
 
 
+def _at_line(entry: ManifestEntry, text: str) -> str:
+    """``text`` prefixed with the entry's manifest line (none for an image given directly)."""
+    return f"line {entry.line}: {text}" if entry.line > 0 else text
+
+
 def plan_jobs(
     entries: Iterable[ManifestEntry], known_hashes: dict[str, int]
 ) -> tuple[list[_Job], list[Outcome]]:
     """Hash each image; return the jobs to extract and the outcomes already decided.
 
-    Decided: unreadable (failed), already in the map or repeated in the dataset (skipped).
+    Decided: unreadable or not a regular file (failed), already in the map or repeated in the
+    dataset (skipped).
     """
     jobs: list[_Job] = []
     decided: list[Outcome] = []
@@ -119,7 +125,11 @@ def plan_jobs(
             sha = sha256_file(entry.path)
         except OSError as error:
             reason = f"cannot read {entry.path}: {error.strerror or error}"
-            decided.append(Outcome(entry.image, Status.FAILED, message=reason))
+            decided.append(Outcome(entry.image, Status.FAILED, message=_at_line(entry, reason)))
+            continue
+        except NotARegularFileError as error:
+            message = _at_line(entry, f"{error}; only regular files are read")
+            decided.append(Outcome(entry.image, Status.FAILED, message=message))
             continue
         if sha in known_hashes:
             place_id = known_hashes[sha]

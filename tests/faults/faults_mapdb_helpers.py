@@ -15,6 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from mapdb.records import Fingerprint
+
 REPO = Path(__file__).resolve().parents[2]
 MAPDB_TESTS = REPO / "tests" / "mapdb"
 
@@ -111,3 +113,37 @@ def assert_consistent(path: Path, detectors: int = 2) -> None:
             "ON f.place_id = p.id GROUP BY p.id"
         ).fetchall()
     assert all(count == detectors for _, count in per_place), per_place
+
+
+def fake_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> list[Fingerprint]:
+    """Decode ``path`` (``ValueError`` if corrupt); one tiny synthetic fingerprint per preset."""
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise ValueError(f"{path}: corrupt or not an image")
+    height_px, width_px = image.shape
+    rng = np.random.default_rng(int(image.sum()))
+    xy = rng.uniform([0, 0], [width_px - 1, height_px - 1], size=(8, 2))
+    return [
+        Fingerprint(
+            detector=preset.split("-")[0],
+            image_width_px=width_px,
+            image_height_px=height_px,
+            keypoints_xy=xy.astype(np.float32),
+            bearings_rad=np.angle(np.exp(-2j * np.pi * xy[:, 0] / width_px)),
+            descriptors=rng.random((8, 128), dtype=np.float32),
+            params={"detector": preset.split("-")[0]},
+        )
+        for preset in presets
+    ]
+
+
+def run_toploc(*args: str | Path, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
+    """``python -m toploc ARGS`` as a user runs it (text output, never hangs the tests)."""
+    return subprocess.run(
+        [sys.executable, "-m", "toploc", *(str(a) for a in args)],
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )

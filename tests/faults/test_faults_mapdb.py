@@ -8,18 +8,26 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from click.testing import CliRunner, Result
 from faults_mapdb_helpers import (
     assert_consistent,
+    fake_extract,
     live_session_members,
     make_dataset,
     places_so_far,
+    run_toploc,
     start_slow_build,
+    write_image,
+    write_manifest,
 )
+
+from toploc.commands.map import map_group
 
 N_IMAGES = 24
 on_linux = pytest.mark.skipif(
@@ -82,3 +90,102 @@ def test_sigterm_of_map_build_is_a_clean_interrupt(tmp_path: Path) -> None:
     assert left == [], f"processes of the terminated build still run: {left}"
     assert 2 <= places_so_far(db_path) < N_IMAGES
     assert_consistent(db_path)
+
+
+@pytest.fixture
+def fake_extractor(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``toploc map`` run in this process extracts with the helpers' ``fake_extract``."""
+    from toploc import extraction
+
+    monkeypatch.setattr(extraction, "extract_panorama", fake_extract)
+
+
+def build(dataset: Path, db_path: Path, *extra: str) -> Result:
+    """``toploc map build`` in this process, in-process extraction, no calibration."""
+    args = ["build", str(dataset), "--db", str(db_path), "--workers", "0", "--no-progress"]
+    return CliRunner().invoke(map_group, [*args, "--no-calibrate", *extra])
+
+
+def assert_one_line_error(result: Result | subprocess.CompletedProcess, *names: str) -> str:
+    """Exit 1, no traceback, and an ``Error:`` line that names every one of ``names``."""
+    output = result.output if isinstance(result, Result) else result.stdout + result.stderr
+    code = result.exit_code if isinstance(result, Result) else result.returncode
+    assert code == 1, output
+    assert "Traceback" not in output, output
+    if isinstance(result, Result):
+        assert result.exception is None or isinstance(result.exception, SystemExit), output
+    (line,) = [line for line in output.splitlines() if line.startswith("Error: ")]
+    for name in names:
+        assert name in line, line
+    return line
+
+
+@pytest.mark.parametrize("where", ["dotdot", "absolute", "symlink"])
+def test_manifest_image_outside_the_dataset_is_refused(
+    tmp_path: Path, where: str, fake_extractor: None
+) -> None:
+    outside = write_image(tmp_path / "elsewhere" / "x.png", seed=5)
+    dataset = make_dataset(tmp_path / "deep" / "ds", 2)
+    if where == "symlink":
+        (dataset / "img" / "link.png").symlink_to(outside)
+    name = {"dotdot": "../../elsewhere/x.png", "absolute": str(outside), "symlink": "img/link.png"}
+    manifest = (dataset / "manifest.csv").read_text() + f"{name[where]},hall,1,1,0\n"
+    (dataset / "manifest.csv").write_text(manifest)
+    db_path = tmp_path / "map.db"
+    line = assert_one_line_error(build(dataset, db_path), "manifest.csv line 4", name[where])
+    assert "outside the dataset folder" in line
+    assert not db_path.exists() or places_so_far(db_path) == 0  # nothing imported
+
+    allowed = build(dataset, db_path, "--allow-outside")
+    assert allowed.exit_code == 0, allowed.output
+    assert "added 3, skipped 0, failed 0" in allowed.stdout
+
+
+def build_process(dataset: Path, db_path: Path, *extra: str) -> subprocess.CompletedProcess:
+    """``python -m toploc map build`` (SIFT, in-process), stopped after 60 s if it hangs."""
+    return run_toploc("map", "build", dataset, "--db", db_path, "--workers", "0",
+                      "--no-progress", "--no-calibrate", "--detector", "sift", *extra,
+                      timeout_s=60)  # fmt: skip
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+def test_fifo_row_fails_at_once_instead_of_hanging(tmp_path: Path) -> None:
+    dataset = make_dataset(tmp_path / "ds", 1)
+    os.mkfifo(dataset / "img" / "pipe.png")
+    lines = (dataset / "manifest.csv").read_text().splitlines()
+    write_manifest(dataset, [*lines, "img/pipe.png,hall,,,"])
+    db_path = tmp_path / "map.db"
+    result = build_process(dataset, db_path)
+    assert_one_line_error(result, "1 image(s) failed", "img/pipe.png")
+    assert "line 3: " in result.stderr
+    assert "pipe.png is a FIFO (named pipe), not a regular file" in result.stderr
+    assert places_so_far(db_path) == 1
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="needs /dev/zero")
+def test_dev_zero_row_fails_at_once_instead_of_hanging(tmp_path: Path) -> None:
+    dataset = make_dataset(tmp_path / "ds", 1)
+    lines = (dataset / "manifest.csv").read_text().splitlines()
+    write_manifest(dataset, [*lines, "/dev/zero,hall,,,"])
+    result = build_process(dataset, tmp_path / "map.db", "--allow-outside")
+    assert_one_line_error(result, "1 image(s) failed", "/dev/zero")
+    assert "line 3: /dev/zero is a character device, not a regular file" in result.stderr
+
+
+def test_latin_1_manifest_is_one_line_naming_line_and_byte(tmp_path: Path) -> None:
+    dataset = make_dataset(tmp_path / "ds", 2, rooms=("kitchen", "hall"))
+    lines = (dataset / "manifest.csv").read_text().splitlines()
+    write_manifest(dataset, [*lines, "img/pano_000.png,café,,,"], encoding="latin-1")
+    offset = len("\n".join(lines)) + 1 + len("img/pano_000.png,caf")
+    line = assert_one_line_error(
+        build(dataset, tmp_path / "map.db"), "manifest.csv line 4", f"byte {offset}", "UTF-8"
+    )
+    assert "0xe9" in line
+
+
+def test_manifest_image_with_a_nul_byte_is_one_line(tmp_path: Path) -> None:
+    dataset = make_dataset(tmp_path / "ds", 1)
+    (dataset / "manifest.csv").write_bytes(
+        b"image,room,x_m,y_m,heading_deg\nimg/a\x00.png,hall,,,\n"
+    )
+    assert_one_line_error(build(dataset, tmp_path / "map.db"), "manifest.csv line 2")

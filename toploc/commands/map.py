@@ -143,6 +143,11 @@ def map_group() -> None:
 )
 @camera_option
 @calibrate_option
+@click.option(
+    "--allow-outside",
+    is_flag=True,
+    help="Import manifest images that lie outside DATASET (absolute paths, '..', symlinks).",
+)
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 @click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
 def build_command(
@@ -152,6 +157,7 @@ def build_command(
     workers: int,
     camera: str,
     calibrate: bool,
+    allow_outside: bool,
     progress: bool,
     verbose: bool,
 ) -> None:
@@ -159,10 +165,11 @@ def build_command(
 
     Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
     An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
+    Only regular files inside DATASET are read (see --allow-outside).
     """
     presets = parse_detectors(detectors)
     with _sigterm_as_interrupt(), _map_errors():
-        entries = read_manifest(dataset)
+        entries = read_manifest(dataset, allow_outside=allow_outside)
         edges = read_edges(dataset)
         with MapDatabase.open(db_path) as map_db:
             report = build_map(
