@@ -135,8 +135,8 @@ class MapDatabase:
         known = len(migrations)
         if version is None:
             raise NotAMapDatabaseError(
-                f"{path} is an SQLite database but not a toploc map (no schema version in "
-                f"its 'meta' table)",
+                f"{path} is an SQLite database but not a toploc map (no valid schema version "
+                f"in its 'meta' table)",
                 path,
             )
         if version > known:

@@ -28,7 +28,7 @@ from mapdb.codec import (
     fingerprint_from_row,
 )
 from mapdb.database import MapDatabase
-from mapdb.errors import SchemaVersionError, translate_sqlite_error
+from mapdb.errors import EmptyMapError, SchemaVersionError, translate_sqlite_error
 from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
 
 _SELECT = (
@@ -134,8 +134,8 @@ def open_for_reading(path: Path) -> MapDatabase:
 def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     """Read what a localizer needs from the map at ``path`` (read-only, then closed).
 
-    Raises ``ValueError`` if the map has no place with a ``detector`` fingerprint; database
-    errors are :class:`mapdb.errors.MapDatabaseError`.
+    Raises :class:`mapdb.errors.EmptyMapError` (a ``ValueError``) if the map has no place with
+    a ``detector`` fingerprint; every error is a :class:`mapdb.errors.MapDatabaseError`.
     """
     path = Path(path)
     with open_for_reading(path) as map_db:
@@ -145,7 +145,8 @@ def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
         edges = tuple(map_db.edges())
         likelihood = map_db.likelihood(detector)
     if not len(table.place_ids):
-        raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
+        what = "no places" if not places else f"no place with a {detector!r} fingerprint"
+        raise EmptyMapError(f"map {path} has {what}: build it first (toploc map build)", path)
     with_fingerprint = {int(p) for p in table.place_ids}
     kept = tuple(p for p in places if p.id in with_fingerprint)
     kept_rooms = tuple(r for r in rooms if any(p.room == r for p in kept))

@@ -132,7 +132,8 @@ def read_schema_version(db: sqlite_utils.Database) -> int | None:
     """The schema version of ``db``: 0 for an empty file, ``None`` if it is not a toploc map.
 
     "Not a map" means other tables exist but no ``meta`` table, or ``meta`` lacks a valid
-    version. Reads only; raises ``sqlite3.DatabaseError`` if the file is not SQLite.
+    version (missing, NULL, not a whole number, or negative). Reads only; raises
+    ``sqlite3.DatabaseError`` if the file is not SQLite.
     """
     names = db.table_names()
     if META_TABLE not in names:
@@ -141,9 +142,10 @@ def read_schema_version(db: sqlite_utils.Database) -> int | None:
     if not rows:
         return None
     try:
-        return int(rows[0]["value"])
-    except ValueError:
+        version = int(rows[0]["value"])
+    except (TypeError, ValueError):  # NULL, a blob or text that is not a number
         return None
+    return version if version >= 0 else None
 
 
 def migrate(db: sqlite_utils.Database, migrations: Sequence[Migration] = MIGRATIONS) -> int:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -27,6 +28,9 @@ from faults_mapdb_helpers import (
     write_manifest,
 )
 
+from mapdb.database import MapDatabase
+from mapdb.errors import NotAMapDatabaseError
+from toploc.commands.localize import localize
 from toploc.commands.map import map_group
 
 N_IMAGES = 24
@@ -189,3 +193,50 @@ def test_manifest_image_with_a_nul_byte_is_one_line(tmp_path: Path) -> None:
         b"image,room,x_m,y_m,heading_deg\nimg/a\x00.png,hall,,,\n"
     )
     assert_one_line_error(build(dataset, tmp_path / "map.db"), "manifest.csv line 2")
+
+
+def bad_map(tmp_path: Path, kind: str) -> Path:
+    """A map file that cannot be served: ``empty-map`` (a map without places), ``zero-bytes``,
+    ``text`` (not SQLite) or ``null-version`` (``meta.schema_version`` is NULL)."""
+    path = tmp_path / f"{kind}.db"
+    if kind == "zero-bytes":
+        path.touch()
+    elif kind == "text":
+        path.write_text("these are my notes, not a map\n" * 100)
+    else:
+        MapDatabase.open(path).close()
+    if kind == "null-version":
+        with sqlite3.connect(path) as conn:
+            conn.execute("UPDATE meta SET value = NULL WHERE key = 'schema_version'")
+        conn.close()
+    return path
+
+
+MAP_FAULTS = ["empty-map", "zero-bytes", "text", "null-version"]
+
+
+@pytest.mark.parametrize("sim", [True, False], ids=["sim", "no-sim"])
+@pytest.mark.parametrize("kind", MAP_FAULTS)
+def test_serve_a_bad_map_is_one_line(tmp_path: Path, kind: str, sim: bool) -> None:
+    db_path = bad_map(tmp_path, kind)
+    extra = [] if sim else ["--no-sim"]
+    result = run_toploc("serve", "--db", db_path, "--listen", "tcp/127.0.0.1:0", *extra,
+                        timeout_s=60)  # fmt: skip
+    assert_one_line_error(result, str(db_path))
+
+
+@pytest.mark.parametrize("kind", MAP_FAULTS)
+def test_localize_and_map_info_on_a_bad_map_are_one_line(tmp_path: Path, kind: str) -> None:
+    db_path = bad_map(tmp_path, kind)
+    image = write_image(tmp_path / "query.png", seed=3)
+    result = CliRunner().invoke(localize, [str(image), "--db", str(db_path)])
+    assert_one_line_error(result, str(db_path))
+    if kind != "empty-map":  # an empty map has an empty summary
+        info = CliRunner().invoke(map_group, ["info", "--db", str(db_path)])
+        assert_one_line_error(info, str(db_path))
+
+
+def test_null_schema_version_is_not_a_map(tmp_path: Path) -> None:
+    db_path = bad_map(tmp_path, "null-version")
+    with pytest.raises(NotAMapDatabaseError, match=r"null-version\.db is an SQLite database but"):
+        MapDatabase.open(db_path)

@@ -13,6 +13,7 @@ import click
 from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
+from mapdb.errors import MapDatabaseError
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
 from toploc.commands.options import camera_option
@@ -61,14 +62,12 @@ def serve(
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
     db = db_path or ensure_world_map(sim_world)
-    robot = None
-    if not no_sim:
-        robot = kidnapped_robot(make_world(sim_world), sim_room, seed, db)
     config = BusConfig(robot_id=robot_id, mode=mode, listen=listen, connect=connect)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
+        robot = None if no_sim else kidnapped_robot(make_world(sim_world), sim_room, seed, db)
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
         with start_service(db, config, robot, policy, localizer_config):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
@@ -77,6 +76,6 @@ def serve(
                 f"connect {list(connect)}); robot: {where}. Ctrl-C stops."
             )
             stop.wait()
-    except BusError as error:
+    except (BusError, MapDatabaseError) as error:  # one line naming the bus or the map
         raise click.ClickException(str(error)) from error
     click.echo("stopped")
