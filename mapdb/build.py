@@ -243,16 +243,16 @@ def _store(map_db: MapDatabase, job: _Job, result: list[Fingerprint] | Exception
     entry = job.entry
     if isinstance(result, Exception):
         return Outcome(entry.image, Status.FAILED, message=_error_text(result))
-    place = NewPlace(
-        room=entry.room,
-        image_sha256=job.image_sha256,
-        source=str(entry.path.resolve()),
-        x_m=entry.x_m,
-        y_m=entry.y_m,
-        heading_deg=entry.heading_deg,
-        captured_utc=file_mtime_utc(entry.path),
-    )
     try:
+        place = NewPlace(
+            room=entry.room,
+            image_sha256=job.image_sha256,
+            source=str(entry.path.resolve()),
+            x_m=entry.x_m,
+            y_m=entry.y_m,
+            heading_deg=entry.heading_deg,
+            captured_utc=file_mtime_utc(entry.path),
+        )
         place_id = map_db.add_place(place, result)
     except DuplicatePlaceError as error:
         message = f"already in the map as place {error.place_id}"

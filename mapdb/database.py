@@ -23,6 +23,7 @@ import sqlite_utils
 from mapdb.codec import fingerprint_to_row
 from mapdb.errors import (
     DuplicatePlaceError,
+    InvalidValueError,
     MapDatabaseError,
     MapFileNotFoundError,
     NotAMapDatabaseError,
@@ -31,7 +32,7 @@ from mapdb.errors import (
     UnknownRoomError,
     translate_sqlite_error,
 )
-from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary
+from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary, check_name
 from mapdb.schema import (
     META_TABLE,
     MIGRATIONS,
@@ -236,10 +237,18 @@ class MapDatabase:
         table = self.db.table("rooms").insert({"name": name, "created_utc": utc_now_iso()})
         return _inserted_id(table)
 
+    def _checked(self, name: str, what: str = "room name") -> str:
+        """``name`` if :func:`~mapdb.records.check_name` takes it, else an
+        :class:`InvalidValueError` naming this map."""
+        try:
+            return check_name(name, what)
+        except ValueError as error:
+            raise InvalidValueError(f"{error} (map {self.path})", self.path) from None
+
     def add_room(self, name: str) -> int:
-        """Add room ``name`` if it is new (one transaction); return its id."""
-        if not name.strip():
-            raise ValueError(f"room name must not be empty, got {name!r}")
+        """Add room ``name`` if it is new (one transaction); return its id. Raises
+        :class:`InvalidValueError` for a name :func:`~mapdb.records.check_name` refuses."""
+        self._checked(name)
         with self.transaction():
             return self._ensure_room(name)
 
@@ -255,9 +264,11 @@ class MapDatabase:
     def connect_rooms(self, room_a: str, room_b: str) -> bool:
         """Add the undirected edge between two existing rooms; False if it was already there.
 
-        Raises :class:`UnknownRoomError` naming the first unknown room, or ``ValueError`` for a
-        self-loop.
+        Raises :class:`UnknownRoomError` naming the first unknown room, ``ValueError`` for a
+        self-loop, :class:`InvalidValueError` for a name no room can have.
         """
+        self._checked(room_a)
+        self._checked(room_b)
         if room_a == room_b:
             raise ValueError(f"cannot connect room {room_a!r} to itself")
         with self.transaction():
@@ -299,11 +310,13 @@ class MapDatabase:
 
         All or nothing: on any error (duplicate image, full disk, lock) nothing is written.
         Raises :class:`DuplicatePlaceError` if the image is already in the map, ``ValueError``
-        for no fingerprints, repeated detectors or differing image sizes.
+        for no fingerprints, repeated detectors, differing image sizes or a detector or camera
+        name :func:`~mapdb.records.check_name` refuses (the place itself is checked by
+        :class:`~mapdb.records.NewPlace`: room name, finite pose).
         """
         if not fingerprints:
             raise ValueError(f"place {place.source!r} has no fingerprints")
-        detectors = [f.detector for f in fingerprints]
+        detectors = [self._checked(f.detector, "detector name") for f in fingerprints]
         if len(set(detectors)) != len(detectors):
             raise ValueError(f"place {place.source!r} repeats a detector: {detectors}")
         sizes = {(f.image_width_px, f.image_height_px) for f in fingerprints}
@@ -314,6 +327,7 @@ class MapDatabase:
         if len(cameras) != 1:
             raise ValueError(f"fingerprints of {place.source!r} disagree on the camera: {cameras}")
         (camera,) = cameras
+        self._checked(camera, "camera model")
         rows = [fingerprint_to_row(f) for f in fingerprints]
         with self.transaction():
             existing = self._place_id_for_image(place.image_sha256)

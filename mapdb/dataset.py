@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from mapdb.errors import ManifestError
+from mapdb.records import check_name
 
 MANIFEST_NAME = "manifest.csv"
 MANIFEST_COLUMNS = ("image", "room", "x_m", "y_m", "heading_deg")
@@ -58,6 +59,14 @@ def _optional_float(text: str | None, column: str, line: int, manifest: Path) ->
             f"{manifest} line {line}: column {column!r} must be finite, got {text!r}", manifest
         )
     return value
+
+
+def _check_room(room: str, line: int, path: Path) -> None:
+    """A :class:`ManifestError` naming file and line for a room name no map can hold."""
+    try:
+        check_name(room)
+    except ValueError as error:
+        raise ManifestError(f"{path} line {line}: {error}", path) from None
 
 
 def _read_text(path: Path) -> str:
@@ -109,6 +118,7 @@ def _entry(
     if not image or not room:
         column = "image" if not image else "room"
         raise ManifestError(f"{manifest} line {line}: column {column!r} is empty", manifest)
+    _check_room(room, line, manifest)
     x_m = _optional_float(row["x_m"], "x_m", line, manifest)
     y_m = _optional_float(row["y_m"], "y_m", line, manifest)
     if (x_m is None) != (y_m is None):
@@ -178,6 +188,8 @@ def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
                     f"got {a!r} and {b!r}",
                     path,
                 )
+            _check_room(a, reader.line_num, path)
+            _check_room(b, reader.line_num, path)
             edges.append((a, b))
         return edges
     except csv.Error as error:

@@ -6,12 +6,14 @@ may only name regular files inside its folder. Errors: one line naming the input
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sqlite3
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -29,7 +31,8 @@ from faults_mapdb_helpers import (
 )
 
 from mapdb.database import MapDatabase
-from mapdb.errors import NotAMapDatabaseError
+from mapdb.errors import InvalidValueError, NotAMapDatabaseError
+from mapdb.records import MAX_NAME_CHARS, NewPlace
 from toploc.commands.localize import localize
 from toploc.commands.map import map_group
 
@@ -240,3 +243,62 @@ def test_null_schema_version_is_not_a_map(tmp_path: Path) -> None:
     db_path = bad_map(tmp_path, "null-version")
     with pytest.raises(NotAMapDatabaseError, match=r"null-version\.db is an SQLite database but"):
         MapDatabase.open(db_path)
+
+
+@pytest.mark.parametrize(
+    ("option", "value"), [("--x-m", "nan"), ("--y-m", "inf"), ("--heading-deg", "-inf")]
+)
+def test_map_add_refuses_a_non_finite_pose(
+    tmp_path: Path, option: str, value: str, fake_extractor: None
+) -> None:
+    image = write_image(tmp_path / "a.png", seed=1)
+    db_path = tmp_path / "map.db"
+    pose = {"--x-m": "1", "--y-m": "2", "--heading-deg": "3", option: value}
+    args = ["add", str(image), "--db", str(db_path), "--room", "hall", "--no-calibrate"]
+    result = CliRunner().invoke(map_group, [*args, *(t for kv in pose.items() for t in kv)])
+    assert_one_line_error(result, option, value)
+    assert places_so_far(db_path) == 0
+
+
+@pytest.mark.parametrize("field", ["x_m", "y_m", "heading_deg"])
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_the_write_path_refuses_a_non_finite_pose(tmp_path: Path, field: str, value: float) -> None:
+    pose = {"x_m": 1.0, "y_m": 2.0, "heading_deg": 3.0, field: value}
+    with pytest.raises(ValueError, match=rf"{field} must be a finite number or unknown"):
+        NewPlace(room="hall", image_sha256="a" * 64, source="a.png", **pose)
+    place = NewPlace(room="hall", image_sha256="a" * 64, source="a.png")
+    with pytest.raises(ValueError, match=rf"{field} must be a finite number"):
+        replace(place, **{field: value})
+
+
+LONG_NAME = "x" * 100_000
+
+
+def test_map_add_and_connect_refuse_a_name_beyond_the_bound(
+    tmp_path: Path, fake_extractor: None
+) -> None:
+    image = write_image(tmp_path / "a.png", seed=1)
+    db_path = tmp_path / "map.db"
+    base = ["--db", str(db_path), "--no-calibrate"]
+    result = CliRunner().invoke(map_group, ["add", str(image), *base, "--room", LONG_NAME])
+    line = assert_one_line_error(result, "--room", f"more than {MAX_NAME_CHARS}")
+    assert len(line) < 200
+    assert places_so_far(db_path) == 0
+    at_bound = "y" * MAX_NAME_CHARS
+    added = CliRunner().invoke(map_group, ["add", str(image), *base, "--room", at_bound])
+    assert added.exit_code == 0, added.output
+    connect = ["connect", at_bound, LONG_NAME, "--db", str(db_path)]
+    line = assert_one_line_error(CliRunner().invoke(map_group, connect), str(db_path))
+    assert "100000 characters" in line and len(line) < 300
+    with MapDatabase.open(db_path) as map_db, pytest.raises(InvalidValueError):
+        map_db.add_room(LONG_NAME)
+    with MapDatabase.open(db_path) as map_db, pytest.raises(InvalidValueError, match="control"):
+        map_db.add_room("hall\nkitchen")
+
+
+def test_manifest_room_name_beyond_the_bound_is_one_line(tmp_path: Path) -> None:
+    dataset = make_dataset(tmp_path / "ds", 2)
+    lines = (dataset / "manifest.csv").read_text().splitlines()
+    write_manifest(dataset, [*lines, f"img/pano_000.png,{LONG_NAME},,,"])
+    line = assert_one_line_error(build(dataset, tmp_path / "map.db"), "manifest.csv line 4")
+    assert f"more than {MAX_NAME_CHARS}" in line and len(line) < 300

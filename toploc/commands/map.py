@@ -12,6 +12,7 @@ Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.pa
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sys
@@ -29,7 +30,7 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import MapInfo
+from mapdb.records import MapInfo, check_name
 from toploc.commands.options import camera_option
 from toploc.extraction import resolve_extractor
 
@@ -213,8 +214,13 @@ def add_command(
     """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
     if (x_m is None) != (y_m is None):
         raise click.UsageError("give both --x-m and --y-m, or neither")
-    if not room.strip():
-        raise click.BadParameter("must not be empty", param_hint="--room")
+    for hint, value in (("--x-m", x_m), ("--y-m", y_m), ("--heading-deg", heading_deg)):
+        if value is not None and not math.isfinite(value):
+            raise click.ClickException(f"{hint} must be a finite number, got {value}")
+    try:
+        check_name(room.strip())
+    except ValueError as error:
+        raise click.ClickException(f"--room: {error}") from None
     presets = parse_detectors(detectors)
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
