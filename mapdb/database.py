@@ -22,11 +22,14 @@ import sqlite_utils
 
 from mapdb.codec import fingerprint_to_row
 from mapdb.errors import (
+    SQLITE_CANTOPEN,
+    SQLITE_READONLY,
     DuplicatePlaceError,
     InvalidValueError,
     MapDatabaseError,
     MapFileNotFoundError,
     NotAMapDatabaseError,
+    ReadOnlyDatabaseError,
     SchemaVersionError,
     UnknownPlaceError,
     UnknownRoomError,
@@ -36,6 +39,7 @@ from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary, ch
 from mapdb.schema import (
     META_TABLE,
     MIGRATIONS,
+    READ_ONLY_VIEWS,
     SCHEMA_VERSION,
     Migration,
     migrate,
@@ -72,12 +76,41 @@ def _translated(method: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+_CANNOT_READ_IN_PLACE = (SQLITE_CANTOPEN, SQLITE_READONLY)
+"""Codes of a ``mode=ro`` open that fails because a WAL map's ``-shm`` cannot be made."""
+
+
+def _connect_readonly(path: Path) -> sqlite3.Connection:
+    """A read-only connection, also to a map on read-only media.
+
+    ``mode=ro`` first. A WAL map in a folder nobody may write to fails that way (SQLite needs
+    its ``-shm`` file to read), so it is opened ``immutable=1``: no locks and no ``-shm``, which
+    is safe because no one can change the file there. A leftover non-empty ``-wal`` (a writer
+    that did not finish) would be ignored by ``immutable``, so that is a clear error instead.
+    """
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    conn = sqlite3.connect(uri, uri=True)
+    try:
+        conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()
+        return conn
+    except sqlite3.Error as error:
+        conn.close()
+        if (getattr(error, "sqlite_errorcode", 0) or 0) & 0xFF not in _CANNOT_READ_IN_PLACE:
+            raise
+    wal = path.with_name(path.name + "-wal")
+    if wal.exists() and wal.stat().st_size > 0:
+        raise ReadOnlyDatabaseError(
+            f"{path} cannot be read where it is: its folder is read-only and {wal.name} holds "
+            f"writes not yet in the map; open it once on writable media (e.g. `toploc map "
+            f"info` on a copy of both files)",
+            path,
+        )
+    return sqlite3.connect(uri + "&immutable=1", uri=True)
+
+
 def _connect(path: Path, readonly: bool, busy_timeout_s: float) -> sqlite_utils.Database:
-    """Open the SQLite connection (read-only through a ``mode=ro`` URI) and set its pragmas."""
-    if readonly:
-        conn = sqlite3.connect(f"file:{quote(str(path.resolve()))}?mode=ro", uri=True)
-    else:
-        conn = sqlite3.connect(str(path))
+    """Open the SQLite connection (read-only: :func:`_connect_readonly`), set its pragmas."""
+    conn = _connect_readonly(path) if readonly else sqlite3.connect(str(path))
     db = sqlite_utils.Database(conn, execute_plugins=False)
     db.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
     db.execute("PRAGMA foreign_keys = ON")
@@ -106,7 +139,9 @@ class MapDatabase:
 
         Checks before writing anything: a file that is not SQLite or not a toploc map raises
         :class:`NotAMapDatabaseError`, a newer schema :class:`SchemaVersionError`; the file is
-        left untouched. ``readonly`` opens with ``mode=ro`` and never migrates.
+        left untouched. ``readonly`` opens with ``mode=ro`` (``immutable=1`` on read-only
+        media) and never writes: an older schema is read through temporary views
+        (:data:`mapdb.schema.READ_ONLY_VIEWS`).
         """
         path = Path(path)
         if (readonly or not create) and not path.exists():
@@ -149,11 +184,15 @@ class MapDatabase:
         if readonly and version == 0:
             raise NotAMapDatabaseError(f"{path} is empty, not a toploc map", path)
         if readonly and version < known:
-            raise SchemaVersionError(
-                f"{path} has map schema version {version}, older than {known}; open it for "
-                f"writing once (e.g. `toploc map add` or `map connect`) to migrate it",
-                path,
-            )
+            views = [READ_ONLY_VIEWS.get(migration) for migration in migrations[version:]]
+            if any(view is None for view in views):
+                raise SchemaVersionError(
+                    f"{path} has map schema version {version}, older than {known}; open it for "
+                    f"writing once (e.g. `toploc map add` or `map connect`) to migrate it",
+                    path,
+                )
+            for view in views:  # the newer schema in memory; the file is not changed
+                db.execute(str(view))
         if not readonly:
             db.enable_wal()
             migrate(db, migrations)

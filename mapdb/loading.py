@@ -28,7 +28,7 @@ from mapdb.codec import (
     fingerprint_from_row,
 )
 from mapdb.database import MapDatabase
-from mapdb.errors import EmptyMapError, SchemaVersionError, translate_sqlite_error
+from mapdb.errors import EmptyMapError, translate_sqlite_error
 from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
 
 _SELECT = (
@@ -120,14 +120,9 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
 
 
 def open_for_reading(path: Path) -> MapDatabase:
-    """The map at ``path`` opened read-only; a map made by an older toploc is migrated first
-    (one write, as any writing command would do), so it still opens."""
-    try:
-        return MapDatabase.open(path, create=False, readonly=True)
-    except SchemaVersionError as error:
-        if "older" not in str(error):
-            raise
-    MapDatabase.open(path, create=False).close()  # migrates, or names why it cannot
+    """The map at ``path`` opened read-only, never written: on read-only media too, and a map
+    made by an older toploc is read through views of the current schema (see
+    :meth:`MapDatabase.open`)."""
     return MapDatabase.open(path, create=False, readonly=True)
 
 

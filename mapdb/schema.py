@@ -127,6 +127,13 @@ def _v2_camera(db: sqlite_utils.Database) -> None:
 MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera)
 SCHEMA_VERSION = len(MIGRATIONS)
 
+READ_ONLY_VIEWS: dict[Migration, str] = {
+    _v2_camera: "CREATE TEMP VIEW places AS SELECT *, 'cylinder' AS camera FROM main.places",
+}
+"""For a migration, the SQL that shows its result to a read-only connection without writing:
+a ``TEMP`` view (kept in memory) named like the table it shadows. A map too old to have one
+for every missing migration must be opened for writing once, which migrates it."""
+
 
 def read_schema_version(db: sqlite_utils.Database) -> int | None:
     """The schema version of ``db``: 0 for an empty file, ``None`` if it is not a toploc map.

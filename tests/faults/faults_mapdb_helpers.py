@@ -7,6 +7,7 @@ group with a slow fake extractor), so a build can be stopped mid-way.
 from __future__ import annotations
 
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -147,3 +148,40 @@ def run_toploc(*args: str | Path, timeout_s: float = 120.0) -> subprocess.Comple
         text=True,
         timeout=timeout_s,
     )
+
+
+def can_bind_mount_read_only() -> bool:
+    """True if ``unshare -m`` can make a private read-only bind mount here (root with
+    CAP_SYS_ADMIN, as in a CI container); root ignores file modes, so this is its read-only."""
+    if shutil.which("unshare") is None:
+        return False
+    probe = ["unshare", "-m", "--propagation", "private", "mount", "--bind", "-o", "ro", "/", "/"]
+    try:
+        return subprocess.run(probe, capture_output=True, timeout=10).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+
+
+def on_read_only_folder(folder: Path, argv: list[str]) -> list[str]:
+    """``argv`` wrapped to run with ``folder`` read-only: as root in a private mount namespace
+    with a read-only bind mount of it; otherwise the caller has chmod-ed it (0o555/0o444)."""
+    if os.geteuid() != 0:
+        return argv
+    script = 'mount --bind -o ro "$1" "$1" && shift && exec "$@"'
+    return ["unshare", "-m", "--propagation", "private", "sh", "-c", script, "sh", str(folder),
+            *argv]  # fmt: skip
+
+
+def make_read_only(folder: Path) -> None:
+    """Without root, chmod ``folder`` and its files read-only (root uses a mount instead)."""
+    if os.geteuid() != 0:
+        for path in folder.iterdir():
+            path.chmod(0o444)
+        folder.chmod(0o555)
+
+
+def make_writable(folder: Path) -> None:
+    """Undo :func:`make_read_only` (so that pytest can remove ``folder``)."""
+    folder.chmod(0o755)
+    for path in folder.iterdir():
+        path.chmod(0o644)

@@ -6,23 +6,31 @@ may only name regular files inside its folder. Errors: one line naming the input
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner, Result
 from faults_mapdb_helpers import (
+    REPO,
     assert_consistent,
+    can_bind_mount_read_only,
     fake_extract,
     live_session_members,
     make_dataset,
+    make_read_only,
+    make_writable,
+    on_read_only_folder,
     places_so_far,
     run_toploc,
     start_slow_build,
@@ -30,11 +38,16 @@ from faults_mapdb_helpers import (
     write_manifest,
 )
 
+from mapdb.build import build_map
 from mapdb.database import MapDatabase
+from mapdb.dataset import read_manifest
 from mapdb.errors import InvalidValueError, NotAMapDatabaseError
+from mapdb.loading import open_for_reading
 from mapdb.records import MAX_NAME_CHARS, NewPlace
+from mapdb.schema import MIGRATIONS
 from toploc.commands.localize import localize
 from toploc.commands.map import map_group
+from toploc.extraction import resolve_extractor
 
 N_IMAGES = 24
 on_linux = pytest.mark.skipif(
@@ -302,3 +315,110 @@ def test_manifest_room_name_beyond_the_bound_is_one_line(tmp_path: Path) -> None
     write_manifest(dataset, [*lines, f"img/pano_000.png,{LONG_NAME},,,"])
     line = assert_one_line_error(build(dataset, tmp_path / "map.db"), "manifest.csv line 4")
     assert f"more than {MAX_NAME_CHARS}" in line and len(line) < 300
+
+
+read_only_possible = pytest.mark.skipif(
+    os.geteuid() == 0 and not can_bind_mount_read_only(),
+    reason="root ignores file modes and cannot bind-mount read-only here",
+)
+
+
+@pytest.fixture
+def read_only_map(tmp_path: Path) -> Iterator[tuple[Path, Path]]:
+    """``(db_path, query_image)``: a small SIFT map in WAL mode, alone in a folder that is
+    read-only for the commands run through :func:`on_read_only_folder` (no ``-shm`` there)."""
+    dataset = make_dataset(tmp_path / "ds", 4, rooms=("kitchen", "hall"))
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    db_path = folder / "map.db"
+    with MapDatabase.open(db_path) as map_db:
+        entries = read_manifest(dataset)
+        build_map(map_db, entries, resolve_extractor(("sift",)), workers=0, progress=False)
+    assert db_path.read_bytes()[18:20] == b"\x02\x02"  # file format versions 2: WAL mode
+    assert sorted(p.name for p in folder.iterdir()) == ["map.db"]  # no -wal, no -shm
+    make_read_only(folder)
+    try:
+        yield db_path, dataset / "img" / "pano_001.png"
+    finally:
+        make_writable(folder)
+
+
+def run_on_read_only(folder: Path, *args: str | Path) -> subprocess.CompletedProcess:
+    argv = [sys.executable, "-m", "toploc", *(str(a) for a in args)]
+    return subprocess.run(
+        on_read_only_folder(folder, argv),
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@read_only_possible
+def test_a_wal_map_on_read_only_media_opens_for_info_and_localize(
+    read_only_map: tuple[Path, Path],
+) -> None:
+    db_path, query = read_only_map
+    folder = db_path.parent
+    info = run_on_read_only(folder, "map", "info", "--db", db_path, "--json")
+    assert info.returncode == 0, info.stderr
+    assert json.loads(info.stdout)["n_places"] == 4
+    found = run_on_read_only(folder, "localize", query, "--db", db_path, "--json")
+    assert found.returncode == 0, found.stderr
+    assert set(json.loads(found.stdout)["rooms"]) == {"kitchen", "hall"}
+    writing = run_on_read_only(folder, "map", "connect", "kitchen", "hall", "--db", db_path)
+    assert_one_line_error(writing, str(db_path))
+    assert sorted(p.name for p in folder.iterdir()) == ["map.db"]
+
+
+@read_only_possible
+def test_a_wal_map_on_read_only_media_is_served(read_only_map: tuple[Path, Path]) -> None:
+    db_path, _ = read_only_map
+    argv = [sys.executable, "-m", "toploc", "serve", "--db", str(db_path), "--no-sim",
+            "--listen", "tcp/127.0.0.1:0"]  # fmt: skip
+    process = subprocess.Popen(
+        on_read_only_folder(db_path.parent, argv),
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        first_line = process.stdout.readline()  # "serving ..." once the map is loaded
+    finally:
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+    assert first_line.startswith(f"serving {db_path}"), first_line + stderr
+
+
+@read_only_possible
+def test_an_unfinished_wal_on_read_only_media_is_one_line(tmp_path: Path) -> None:
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    writer = MapDatabase.open(tmp_path / "live.db")
+    try:
+        writer.db.execute("PRAGMA wal_autocheckpoint = 0")
+        writer.add_room("kitchen")  # in the -wal only, until a checkpoint
+        for suffix in ("", "-wal"):
+            shutil.copy(tmp_path / f"live.db{suffix}", folder / f"map.db{suffix}")
+    finally:
+        writer.close()
+    make_read_only(folder)
+    try:
+        result = run_on_read_only(folder, "map", "info", "--db", folder / "map.db")
+    finally:
+        make_writable(folder)
+    line = assert_one_line_error(result, str(folder / "map.db"), "map.db-wal")
+    assert "read-only" in line
+
+
+def test_an_older_map_is_read_without_writing(tmp_path: Path) -> None:
+    db_path = tmp_path / "old.db"
+    with MapDatabase.open(db_path, migrations=MIGRATIONS[:1]) as old:
+        old.add_room("hall")
+    before = db_path.read_bytes()
+    with open_for_reading(db_path) as map_db:
+        assert map_db.schema_version() == 1
+        assert map_db.places() == [] and [r.name for r in map_db.rooms()] == ["hall"]
+    assert db_path.read_bytes() == before
