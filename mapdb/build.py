@@ -55,6 +55,8 @@ class Outcome:
     status: Status
     place_id: int | None = None
     message: str = ""
+    warning: bool = False
+    """A skip worth telling without ``--verbose`` (an image listed twice)."""
 
     def describe(self) -> str:
         """One line for a log: ``"<status> <image>: <message>"``."""
@@ -109,17 +111,32 @@ def _at_line(entry: ManifestEntry, text: str) -> str:
     return f"line {entry.line}: {text}" if entry.line > 0 else text
 
 
+def _pose(entry: ManifestEntry) -> tuple[str, float | None, float | None, float | None]:
+    return (entry.room, entry.x_m, entry.y_m, entry.heading_deg)
+
+
+def _conflict(entry: ManifestEntry, other: ManifestEntry) -> str:
+    """Why two rows of the same image cannot both be right, naming both lines."""
+    return _at_line(
+        entry,
+        f"same image as line {other.line} ({other.image}) but in room {entry.room!r} at "
+        f"{_pose(entry)[1:]} against room {other.room!r} at {_pose(other)[1:]}: conflicting "
+        f"duplicates, neither is imported; keep the right row",
+    )
+
+
 def plan_jobs(
     entries: Iterable[ManifestEntry], known_hashes: dict[str, int]
 ) -> tuple[list[_Job], list[Outcome]]:
     """Hash each image; return the jobs to extract and the outcomes already decided.
 
-    Decided: unreadable or not a regular file (failed), already in the map or repeated in the
-    dataset (skipped).
+    Decided: unreadable or not a regular file (failed), already in the map (skipped), listed
+    again with the same room and pose (skipped, with a warning), listed again with another room
+    or pose (both rows failed: conflicting duplicates, neither is imported).
     """
-    jobs: list[_Job] = []
     decided: list[Outcome] = []
-    seen: dict[str, str] = {}
+    first: dict[str, ManifestEntry] = {}
+    conflicting: dict[str, ManifestEntry] = {}  # image -> the first row that contradicts it
     for entry in entries:
         try:
             sha = sha256_file(entry.path)
@@ -135,11 +152,22 @@ def plan_jobs(
             place_id = known_hashes[sha]
             message = f"already in the map as place {place_id}"
             decided.append(Outcome(entry.image, Status.SKIPPED, place_id, message))
-        elif sha in seen:
-            message = f"same image as {seen[sha]} earlier in this dataset"
-            decided.append(Outcome(entry.image, Status.SKIPPED, message=message))
+        elif sha not in first:
+            first[sha] = entry
+        elif _pose(first[sha]) == _pose(entry):
+            message = _at_line(entry, f"exact duplicate of line {first[sha].line}, skipped")
+            decided.append(Outcome(entry.image, Status.SKIPPED, message=message, warning=True))
         else:
-            seen[sha] = entry.image
+            conflicting.setdefault(sha, entry)
+            decided.append(
+                Outcome(entry.image, Status.FAILED, message=_conflict(entry, first[sha]))
+            )
+    jobs = []
+    for sha, entry in first.items():
+        if sha in conflicting:
+            message = _conflict(entry, conflicting[sha])
+            decided.append(Outcome(entry.image, Status.FAILED, message=message))
+        else:
             jobs.append(_Job(entry, sha))
     return jobs, decided
 

@@ -167,6 +167,27 @@ def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
     The file is optional: none gives no edges. Raises :class:`ManifestError` naming the file and
     line for a missing column, an empty cell or a self-loop.
     """
+    return [(a, b) for a, b, _ in read_edge_rows(dataset_dir)]
+
+
+def check_edge_rooms(
+    dataset_dir: Path | str, rows: list[tuple[str, str, int]], known: set[str]
+) -> None:
+    """A :class:`ManifestError` naming ``edges.csv``, the line and the room for the first edge
+    whose room is not in ``known`` (the manifest's rooms and the map's)."""
+    path = Path(dataset_dir) / EDGES_NAME
+    for a, b, line in rows:
+        for room in (a, b):
+            if room not in known:
+                raise ManifestError(
+                    f"{path} line {line}: room {room!r} is in neither {MANIFEST_NAME} nor the "
+                    f"map; fix the name, or pass --create-rooms to `map build` to create it",
+                    path,
+                )
+
+
+def read_edge_rows(dataset_dir: Path | str) -> list[tuple[str, str, int]]:
+    """:func:`read_edges` with the line of each edge: ``(room_a, room_b, line)``."""
     path = Path(dataset_dir) / EDGES_NAME
     if not path.is_file():
         return []
@@ -190,7 +211,7 @@ def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
                 )
             _check_room(a, reader.line_num, path)
             _check_room(b, reader.line_num, path)
-            edges.append((a, b))
+            edges.append((a, b, reader.line_num))
         return edges
     except csv.Error as error:
         raise ManifestError(f"{path} line {reader.line_num}: {error}", path) from None

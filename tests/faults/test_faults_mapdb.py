@@ -422,3 +422,41 @@ def test_an_older_map_is_read_without_writing(tmp_path: Path) -> None:
         assert map_db.schema_version() == 1
         assert map_db.places() == [] and [r.name for r in map_db.rooms()] == ["hall"]
     assert db_path.read_bytes() == before
+
+
+def test_edges_naming_an_unknown_room_is_an_error_or_creates_it(
+    tmp_path: Path, fake_extractor: None
+) -> None:
+    dataset = make_dataset(tmp_path / "ds", 2)
+    (dataset / "edges.csv").write_text("room_a,room_b\nhall,kitchen\nhall,garden\n")
+    db_path = tmp_path / "map.db"
+    assert_one_line_error(build(dataset, db_path), "edges.csv line 3", "'garden'", "--create-rooms")
+    assert places_so_far(db_path) == 0
+    created = build(dataset, db_path, "--create-rooms")
+    assert created.exit_code == 0, created.output
+    assert "connected 2 pair(s) of rooms from edges.csv" in created.stdout
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert map_db.edges() == [("garden", "hall"), ("hall", "kitchen")]
+        assert {r.name: r.n_places for r in map_db.rooms()} == {
+            "garden": 0,
+            "hall": 1,
+            "kitchen": 1,
+        }
+
+
+def test_same_image_under_two_rooms_is_an_error_naming_both_rows(
+    tmp_path: Path, fake_extractor: None
+) -> None:
+    dataset = make_dataset(tmp_path / "ds", 2)  # line 3: img/pano_001.png in the hall at 1,0,0
+    lines = (dataset / "manifest.csv").read_text().splitlines()
+    write_manifest(
+        dataset, [*lines, "img/pano_001.png,kitchen,1,0,0", "img/pano_000.png,kitchen,0,0,0"]
+    )
+    db_path = tmp_path / "map.db"
+    result = build(dataset, db_path)
+    assert_one_line_error(result, "2 image(s) failed", "img/pano_001.png")
+    assert "line 3: same image as line 4 (img/pano_001.png) but in room 'hall'" in result.stderr
+    assert "line 4: same image as line 3 (img/pano_001.png) but in room 'kitchen'" in result.stderr
+    assert "line 5: exact duplicate of line 2, skipped" in result.stderr  # a warning, not -v
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert [(p.room, p.x_m) for p in map_db.places()] == [("kitchen", 0.0)]

@@ -27,7 +27,13 @@ from tqdm import tqdm
 from localizer.likelihood import RatioLikelihood
 from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
-from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
+from mapdb.dataset import (
+    EDGES_NAME,
+    ManifestEntry,
+    check_edge_rooms,
+    read_edge_rows,
+    read_manifest,
+)
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import MapInfo, check_name
@@ -85,8 +91,9 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 
 def _log_outcome(outcome: Outcome, verbose: bool) -> None:
-    """Failures always, one line each, under the progress bar; the rest with ``--verbose``."""
-    if outcome.status is Status.FAILED or verbose:
+    """Failures and warnings always, one line each, under the progress bar; the rest with
+    ``--verbose``."""
+    if outcome.status is Status.FAILED or outcome.warning or verbose:
         tqdm.write(outcome.describe(), file=sys.stderr)
 
 
@@ -149,6 +156,11 @@ def map_group() -> None:
     is_flag=True,
     help="Import manifest images that lie outside DATASET (absolute paths, '..', symlinks).",
 )
+@click.option(
+    "--create-rooms",
+    is_flag=True,
+    help="Create the rooms edges.csv names that have no panorama (an error otherwise).",
+)
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 @click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
 def build_command(
@@ -159,6 +171,7 @@ def build_command(
     camera: str,
     calibrate: bool,
     allow_outside: bool,
+    create_rooms: bool,
     progress: bool,
     verbose: bool,
 ) -> None:
@@ -166,13 +179,18 @@ def build_command(
 
     Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
     An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
-    Only regular files inside DATASET are read (see --allow-outside).
+    Only regular files inside DATASET are read (see --allow-outside); a room of edges.csv must
+    be in the manifest or the map (see --create-rooms).
     """
     presets = parse_detectors(detectors)
     with _sigterm_as_interrupt(), _map_errors():
         entries = read_manifest(dataset, allow_outside=allow_outside)
-        edges = read_edges(dataset)
+        edge_rows = read_edge_rows(dataset)
+        edges = [(a, b) for a, b, _ in edge_rows]
         with MapDatabase.open(db_path) as map_db:
+            if not create_rooms:
+                known = {entry.room for entry in entries} | {r.name for r in map_db.rooms()}
+                check_edge_rooms(dataset, edge_rows, known)
             report = build_map(
                 map_db,
                 entries,
@@ -182,6 +200,8 @@ def build_command(
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
             )
             if not report.interrupted:
+                for room in {room for edge in edges for room in edge} if create_rooms else ():
+                    map_db.add_room(room)
                 added = connect_known_rooms(map_db, edges)
                 if added:
                     click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
