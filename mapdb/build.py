@@ -31,10 +31,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from mapdb.database import MapDatabase
-from mapdb.dataset import ManifestEntry, sha256_file
+from mapdb.dataset import ManifestEntry, NotARegularFileError, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
-from mapdb.workers import spawn_process_pool
+from mapdb.workers import spawn_process_pool, stop_workers
 
 Extractor = Callable[[Path], list[Fingerprint]]
 
@@ -55,6 +55,8 @@ class Outcome:
     status: Status
     place_id: int | None = None
     message: str = ""
+    warning: bool = False
+    """A skip worth telling without ``--verbose`` (an image listed twice)."""
 
     def describe(self) -> str:
         """One line for a log: ``"<status> <image>: <message>"``."""
@@ -104,32 +106,68 @@ def _error_text(error: BaseException) -> str:
     return text if isinstance(error, ValueError | OSError) else f"{type(error).__name__}: {text}"
 
 
+def _at_line(entry: ManifestEntry, text: str) -> str:
+    """``text`` prefixed with the entry's manifest line (none for an image given directly)."""
+    return f"line {entry.line}: {text}" if entry.line > 0 else text
+
+
+def _pose(entry: ManifestEntry) -> tuple[str, float | None, float | None, float | None]:
+    return (entry.room, entry.x_m, entry.y_m, entry.heading_deg)
+
+
+def _conflict(entry: ManifestEntry, other: ManifestEntry) -> str:
+    """Why two rows of the same image cannot both be right, naming both lines."""
+    return _at_line(
+        entry,
+        f"same image as line {other.line} ({other.image}) but in room {entry.room!r} at "
+        f"{_pose(entry)[1:]} against room {other.room!r} at {_pose(other)[1:]}: conflicting "
+        f"duplicates, neither is imported; keep the right row",
+    )
+
+
 def plan_jobs(
     entries: Iterable[ManifestEntry], known_hashes: dict[str, int]
 ) -> tuple[list[_Job], list[Outcome]]:
     """Hash each image; return the jobs to extract and the outcomes already decided.
 
-    Decided: unreadable (failed), already in the map or repeated in the dataset (skipped).
+    Decided: unreadable or not a regular file (failed), already in the map (skipped), listed
+    again with the same room and pose (skipped, with a warning), listed again with another room
+    or pose (both rows failed: conflicting duplicates, neither is imported).
     """
-    jobs: list[_Job] = []
     decided: list[Outcome] = []
-    seen: dict[str, str] = {}
+    first: dict[str, ManifestEntry] = {}
+    conflicting: dict[str, ManifestEntry] = {}  # image -> the first row that contradicts it
     for entry in entries:
         try:
             sha = sha256_file(entry.path)
         except OSError as error:
             reason = f"cannot read {entry.path}: {error.strerror or error}"
-            decided.append(Outcome(entry.image, Status.FAILED, message=reason))
+            decided.append(Outcome(entry.image, Status.FAILED, message=_at_line(entry, reason)))
+            continue
+        except NotARegularFileError as error:
+            message = _at_line(entry, f"{error}; only regular files are read")
+            decided.append(Outcome(entry.image, Status.FAILED, message=message))
             continue
         if sha in known_hashes:
             place_id = known_hashes[sha]
             message = f"already in the map as place {place_id}"
             decided.append(Outcome(entry.image, Status.SKIPPED, place_id, message))
-        elif sha in seen:
-            message = f"same image as {seen[sha]} earlier in this dataset"
-            decided.append(Outcome(entry.image, Status.SKIPPED, message=message))
+        elif sha not in first:
+            first[sha] = entry
+        elif _pose(first[sha]) == _pose(entry):
+            message = _at_line(entry, f"exact duplicate of line {first[sha].line}, skipped")
+            decided.append(Outcome(entry.image, Status.SKIPPED, message=message, warning=True))
         else:
-            seen[sha] = entry.image
+            conflicting.setdefault(sha, entry)
+            decided.append(
+                Outcome(entry.image, Status.FAILED, message=_conflict(entry, first[sha]))
+            )
+    jobs = []
+    for sha, entry in first.items():
+        if sha in conflicting:
+            message = _conflict(entry, conflicting[sha])
+            decided.append(Outcome(entry.image, Status.FAILED, message=message))
+        else:
             jobs.append(_Job(entry, sha))
     return jobs, decided
 
@@ -175,7 +213,10 @@ def _extract_parallel(
                 yield job, result
         finished = True
     finally:
-        pool.shutdown(wait=finished, cancel_futures=True)
+        if finished:
+            pool.shutdown(wait=True)
+        else:  # interrupted, or a fault: the workers' results are no longer wanted
+            stop_workers(pool)
 
 
 def build_map(
@@ -230,16 +271,16 @@ def _store(map_db: MapDatabase, job: _Job, result: list[Fingerprint] | Exception
     entry = job.entry
     if isinstance(result, Exception):
         return Outcome(entry.image, Status.FAILED, message=_error_text(result))
-    place = NewPlace(
-        room=entry.room,
-        image_sha256=job.image_sha256,
-        source=str(entry.path.resolve()),
-        x_m=entry.x_m,
-        y_m=entry.y_m,
-        heading_deg=entry.heading_deg,
-        captured_utc=file_mtime_utc(entry.path),
-    )
     try:
+        place = NewPlace(
+            room=entry.room,
+            image_sha256=job.image_sha256,
+            source=str(entry.path.resolve()),
+            x_m=entry.x_m,
+            y_m=entry.y_m,
+            heading_deg=entry.heading_deg,
+            captured_utc=file_mtime_utc(entry.path),
+        )
         place_id = map_db.add_place(place, result)
     except DuplicatePlaceError as error:
         message = f"already in the map as place {error.place_id}"

@@ -22,19 +22,24 @@ import sqlite_utils
 
 from mapdb.codec import fingerprint_to_row
 from mapdb.errors import (
+    SQLITE_CANTOPEN,
+    SQLITE_READONLY,
     DuplicatePlaceError,
+    InvalidValueError,
     MapDatabaseError,
     MapFileNotFoundError,
     NotAMapDatabaseError,
+    ReadOnlyDatabaseError,
     SchemaVersionError,
     UnknownPlaceError,
     UnknownRoomError,
     translate_sqlite_error,
 )
-from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary
+from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary, check_name
 from mapdb.schema import (
     META_TABLE,
     MIGRATIONS,
+    READ_ONLY_VIEWS,
     SCHEMA_VERSION,
     Migration,
     migrate,
@@ -71,12 +76,41 @@ def _translated(method: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+_CANNOT_READ_IN_PLACE = (SQLITE_CANTOPEN, SQLITE_READONLY)
+"""Codes of a ``mode=ro`` open that fails because a WAL map's ``-shm`` cannot be made."""
+
+
+def _connect_readonly(path: Path) -> sqlite3.Connection:
+    """A read-only connection, also to a map on read-only media.
+
+    ``mode=ro`` first. A WAL map in a folder nobody may write to fails that way (SQLite needs
+    its ``-shm`` file to read), so it is opened ``immutable=1``: no locks and no ``-shm``, which
+    is safe because no one can change the file there. A leftover non-empty ``-wal`` (a writer
+    that did not finish) would be ignored by ``immutable``, so that is a clear error instead.
+    """
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    conn = sqlite3.connect(uri, uri=True)
+    try:
+        conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()
+        return conn
+    except sqlite3.Error as error:
+        conn.close()
+        if (getattr(error, "sqlite_errorcode", 0) or 0) & 0xFF not in _CANNOT_READ_IN_PLACE:
+            raise
+    wal = path.with_name(path.name + "-wal")
+    if wal.exists() and wal.stat().st_size > 0:
+        raise ReadOnlyDatabaseError(
+            f"{path} cannot be read where it is: its folder is read-only and {wal.name} holds "
+            f"writes not yet in the map; open it once on writable media (e.g. `toploc map "
+            f"info` on a copy of both files)",
+            path,
+        )
+    return sqlite3.connect(uri + "&immutable=1", uri=True)
+
+
 def _connect(path: Path, readonly: bool, busy_timeout_s: float) -> sqlite_utils.Database:
-    """Open the SQLite connection (read-only through a ``mode=ro`` URI) and set its pragmas."""
-    if readonly:
-        conn = sqlite3.connect(f"file:{quote(str(path.resolve()))}?mode=ro", uri=True)
-    else:
-        conn = sqlite3.connect(str(path))
+    """Open the SQLite connection (read-only: :func:`_connect_readonly`), set its pragmas."""
+    conn = _connect_readonly(path) if readonly else sqlite3.connect(str(path))
     db = sqlite_utils.Database(conn, execute_plugins=False)
     db.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
     db.execute("PRAGMA foreign_keys = ON")
@@ -105,7 +139,9 @@ class MapDatabase:
 
         Checks before writing anything: a file that is not SQLite or not a toploc map raises
         :class:`NotAMapDatabaseError`, a newer schema :class:`SchemaVersionError`; the file is
-        left untouched. ``readonly`` opens with ``mode=ro`` and never migrates.
+        left untouched. ``readonly`` opens with ``mode=ro`` (``immutable=1`` on read-only
+        media) and never writes: an older schema is read through temporary views
+        (:data:`mapdb.schema.READ_ONLY_VIEWS`).
         """
         path = Path(path)
         if (readonly or not create) and not path.exists():
@@ -135,8 +171,8 @@ class MapDatabase:
         known = len(migrations)
         if version is None:
             raise NotAMapDatabaseError(
-                f"{path} is an SQLite database but not a toploc map (no schema version in "
-                f"its 'meta' table)",
+                f"{path} is an SQLite database but not a toploc map (no valid schema version "
+                f"in its 'meta' table)",
                 path,
             )
         if version > known:
@@ -148,11 +184,15 @@ class MapDatabase:
         if readonly and version == 0:
             raise NotAMapDatabaseError(f"{path} is empty, not a toploc map", path)
         if readonly and version < known:
-            raise SchemaVersionError(
-                f"{path} has map schema version {version}, older than {known}; open it for "
-                f"writing once (e.g. `toploc map add` or `map connect`) to migrate it",
-                path,
-            )
+            views = [READ_ONLY_VIEWS.get(migration) for migration in migrations[version:]]
+            if any(view is None for view in views):
+                raise SchemaVersionError(
+                    f"{path} has map schema version {version}, older than {known}; open it for "
+                    f"writing once (e.g. `toploc map add` or `map connect`) to migrate it",
+                    path,
+                )
+            for view in views:  # the newer schema in memory; the file is not changed
+                db.execute(str(view))
         if not readonly:
             db.enable_wal()
             migrate(db, migrations)
@@ -236,10 +276,18 @@ class MapDatabase:
         table = self.db.table("rooms").insert({"name": name, "created_utc": utc_now_iso()})
         return _inserted_id(table)
 
+    def _checked(self, name: str, what: str = "room name") -> str:
+        """``name`` if :func:`~mapdb.records.check_name` takes it, else an
+        :class:`InvalidValueError` naming this map."""
+        try:
+            return check_name(name, what)
+        except ValueError as error:
+            raise InvalidValueError(f"{error} (map {self.path})", self.path) from None
+
     def add_room(self, name: str) -> int:
-        """Add room ``name`` if it is new (one transaction); return its id."""
-        if not name.strip():
-            raise ValueError(f"room name must not be empty, got {name!r}")
+        """Add room ``name`` if it is new (one transaction); return its id. Raises
+        :class:`InvalidValueError` for a name :func:`~mapdb.records.check_name` refuses."""
+        self._checked(name)
         with self.transaction():
             return self._ensure_room(name)
 
@@ -255,9 +303,11 @@ class MapDatabase:
     def connect_rooms(self, room_a: str, room_b: str) -> bool:
         """Add the undirected edge between two existing rooms; False if it was already there.
 
-        Raises :class:`UnknownRoomError` naming the first unknown room, or ``ValueError`` for a
-        self-loop.
+        Raises :class:`UnknownRoomError` naming the first unknown room, ``ValueError`` for a
+        self-loop, :class:`InvalidValueError` for a name no room can have.
         """
+        self._checked(room_a)
+        self._checked(room_b)
         if room_a == room_b:
             raise ValueError(f"cannot connect room {room_a!r} to itself")
         with self.transaction():
@@ -299,11 +349,13 @@ class MapDatabase:
 
         All or nothing: on any error (duplicate image, full disk, lock) nothing is written.
         Raises :class:`DuplicatePlaceError` if the image is already in the map, ``ValueError``
-        for no fingerprints, repeated detectors or differing image sizes.
+        for no fingerprints, repeated detectors, differing image sizes or a detector or camera
+        name :func:`~mapdb.records.check_name` refuses (the place itself is checked by
+        :class:`~mapdb.records.NewPlace`: room name, finite pose).
         """
         if not fingerprints:
             raise ValueError(f"place {place.source!r} has no fingerprints")
-        detectors = [f.detector for f in fingerprints]
+        detectors = [self._checked(f.detector, "detector name") for f in fingerprints]
         if len(set(detectors)) != len(detectors):
             raise ValueError(f"place {place.source!r} repeats a detector: {detectors}")
         sizes = {(f.image_width_px, f.image_height_px) for f in fingerprints}
@@ -314,6 +366,7 @@ class MapDatabase:
         if len(cameras) != 1:
             raise ValueError(f"fingerprints of {place.source!r} disagree on the camera: {cameras}")
         (camera,) = cameras
+        self._checked(camera, "camera model")
         rows = [fingerprint_to_row(f) for f in fingerprints]
         with self.transaction():
             existing = self._place_id_for_image(place.image_sha256)

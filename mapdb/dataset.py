@@ -3,17 +3,25 @@
 The manifest has the header ``image,room,x_m,y_m,heading_deg`` (extra columns are ignored);
 ``image`` is relative to the folder; ``x_m``, ``y_m`` (metres) and ``heading_deg`` (degrees, CCW)
 are in the frame of the row's room and may be empty when unknown (``x_m`` and ``y_m`` together).
+Manifest and ``edges.csv`` are UTF-8 (a byte-order mark is allowed). An image must lie inside
+the folder once symbolic links are resolved (unless ``allow_outside``), and only regular files
+are read: a FIFO or a device such as ``/dev/zero`` would block or never end.
 """
 
 from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import math
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from mapdb.errors import ManifestError
+from mapdb.records import check_name
 
 MANIFEST_NAME = "manifest.csv"
 MANIFEST_COLUMNS = ("image", "room", "x_m", "y_m", "heading_deg")
@@ -53,12 +61,64 @@ def _optional_float(text: str | None, column: str, line: int, manifest: Path) ->
     return value
 
 
-def _entry(row: dict[str, str | None], line: int, folder: Path, manifest: Path) -> ManifestEntry:
+def _check_room(room: str, line: int, path: Path) -> None:
+    """A :class:`ManifestError` naming file and line for a room name no map can hold."""
+    try:
+        check_name(room)
+    except ValueError as error:
+        raise ManifestError(f"{path} line {line}: {error}", path) from None
+
+
+def _read_text(path: Path) -> str:
+    """The UTF-8 text of ``path``; a :class:`ManifestError` names the line and byte offset of
+    the first byte that is not UTF-8 (e.g. a file saved as Latin-1)."""
+    try:
+        data = path.read_bytes()
+    except OSError as error:
+        raise ManifestError(f"cannot read {path}: {error.strerror or error}", path) from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = data.count(b"\n", 0, error.start) + 1
+        raise ManifestError(
+            f"{path} line {line}: byte {error.start} ({data[error.start]:#04x}) is not UTF-8; "
+            f"save the file as UTF-8",
+            path,
+        ) from None
+
+
+def _csv_rows(path: Path) -> csv.DictReader[str]:
+    """A ``csv.DictReader`` over the UTF-8 text of ``path``."""
+    return csv.DictReader(io.StringIO(_read_text(path), newline=""))
+
+
+def _inside(image: str, folder: Path, line: int, manifest: Path, allow_outside: bool) -> Path:
+    """``folder / image``; a :class:`ManifestError` if it resolves (through symbolic links, or
+    as an absolute path) to a file outside ``folder`` and ``allow_outside`` is False."""
+    if "\x00" in image:
+        raise ManifestError(f"{manifest} line {line}: image {image!r} has a NUL byte", manifest)
+    path = folder / image
+    if allow_outside:
+        return path
+    resolved = path.resolve()
+    if not resolved.is_relative_to(folder.resolve()):
+        raise ManifestError(
+            f"{manifest} line {line}: image {image!r} lies outside the dataset folder "
+            f"{folder} (it is {resolved}); move it in, or pass --allow-outside to `map build`",
+            manifest,
+        )
+    return path
+
+
+def _entry(
+    row: dict[str, str | None], line: int, folder: Path, manifest: Path, allow_outside: bool
+) -> ManifestEntry:
     image = (row["image"] or "").strip()
     room = (row["room"] or "").strip()
     if not image or not room:
         column = "image" if not image else "room"
         raise ManifestError(f"{manifest} line {line}: column {column!r} is empty", manifest)
+    _check_room(room, line, manifest)
     x_m = _optional_float(row["x_m"], "x_m", line, manifest)
     y_m = _optional_float(row["y_m"], "y_m", line, manifest)
     if (x_m is None) != (y_m is None):
@@ -66,15 +126,18 @@ def _entry(row: dict[str, str | None], line: int, folder: Path, manifest: Path) 
             f"{manifest} line {line}: give both 'x_m' and 'y_m' or leave both empty", manifest
         )
     heading_deg = _optional_float(row["heading_deg"], "heading_deg", line, manifest)
-    return ManifestEntry(image, folder / image, room, x_m, y_m, heading_deg, line)
+    path = _inside(image, folder, line, manifest, allow_outside)
+    return ManifestEntry(image, path, room, x_m, y_m, heading_deg, line)
 
 
-def read_manifest(dataset_dir: Path | str) -> list[ManifestEntry]:
+def read_manifest(dataset_dir: Path | str, allow_outside: bool = False) -> list[ManifestEntry]:
     """All entries of ``dataset_dir/manifest.csv``, in file order.
 
     Raises :class:`ManifestError` naming the file (and the line and column) when the manifest
-    is missing, lacks a column, or has a malformed value. Image files are not checked here: a
-    missing or corrupt image is a per-image failure of the build.
+    is missing, is not UTF-8 or not CSV, lacks a column, has a malformed value, or names an
+    image outside ``dataset_dir`` (symbolic links resolved; allowed with ``allow_outside``).
+    Image files are not read here: a missing or corrupt image is a per-image failure of the
+    build.
     """
     folder = Path(dataset_dir)
     manifest = folder / MANIFEST_NAME
@@ -82,8 +145,8 @@ def read_manifest(dataset_dir: Path | str) -> list[ManifestEntry]:
         raise ManifestError(f"dataset folder {folder} does not exist", folder)
     if not manifest.is_file():
         raise ManifestError(f"{manifest} not found: a dataset needs a {MANIFEST_NAME}", manifest)
-    with manifest.open(newline="", encoding="utf-8-sig") as handle:
-        reader = csv.DictReader(handle)
+    reader = _csv_rows(manifest)
+    try:
         header = [name.strip() for name in reader.fieldnames or []]
         missing = [column for column in MANIFEST_COLUMNS if column not in header]
         if missing:
@@ -93,7 +156,9 @@ def read_manifest(dataset_dir: Path | str) -> list[ManifestEntry]:
                 manifest,
             )
         reader.fieldnames = header
-        return [_entry(row, reader.line_num, folder, manifest) for row in reader]
+        return [_entry(row, reader.line_num, folder, manifest, allow_outside) for row in reader]
+    except csv.Error as error:
+        raise ManifestError(f"{manifest} line {reader.line_num}: {error}", manifest) from None
 
 
 def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
@@ -102,11 +167,32 @@ def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
     The file is optional: none gives no edges. Raises :class:`ManifestError` naming the file and
     line for a missing column, an empty cell or a self-loop.
     """
+    return [(a, b) for a, b, _ in read_edge_rows(dataset_dir)]
+
+
+def check_edge_rooms(
+    dataset_dir: Path | str, rows: list[tuple[str, str, int]], known: set[str]
+) -> None:
+    """A :class:`ManifestError` naming ``edges.csv``, the line and the room for the first edge
+    whose room is not in ``known`` (the manifest's rooms and the map's)."""
+    path = Path(dataset_dir) / EDGES_NAME
+    for a, b, line in rows:
+        for room in (a, b):
+            if room not in known:
+                raise ManifestError(
+                    f"{path} line {line}: room {room!r} is in neither {MANIFEST_NAME} nor the "
+                    f"map; fix the name, or pass --create-rooms to `map build` to create it",
+                    path,
+                )
+
+
+def read_edge_rows(dataset_dir: Path | str) -> list[tuple[str, str, int]]:
+    """:func:`read_edges` with the line of each edge: ``(room_a, room_b, line)``."""
     path = Path(dataset_dir) / EDGES_NAME
     if not path.is_file():
         return []
-    with path.open(newline="", encoding="utf-8-sig") as handle:
-        reader = csv.DictReader(handle)
+    reader = _csv_rows(path)
+    try:
         header = [name.strip() for name in reader.fieldnames or []]
         if any(column not in header for column in EDGES_COLUMNS):
             raise ManifestError(
@@ -123,14 +209,57 @@ def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:
                     f"got {a!r} and {b!r}",
                     path,
                 )
-            edges.append((a, b))
+            _check_room(a, reader.line_num, path)
+            _check_room(b, reader.line_num, path)
+            edges.append((a, b, reader.line_num))
         return edges
+    except csv.Error as error:
+        raise ManifestError(f"{path} line {reader.line_num}: {error}", path) from None
+
+
+_FILE_KINDS = (
+    (stat.S_ISDIR, "directory"),
+    (stat.S_ISFIFO, "FIFO (named pipe)"),
+    (stat.S_ISCHR, "character device"),
+    (stat.S_ISBLK, "block device"),
+    (stat.S_ISSOCK, "socket"),
+)
+
+
+class NotARegularFileError(ValueError):
+    """A path that names a directory, FIFO, device or socket where a file's bytes are read."""
+
+
+def _check_regular(path: Path, mode: int) -> None:
+    if not stat.S_ISREG(mode):
+        kind = next((name for test, name in _FILE_KINDS if test(mode)), "special file")
+        raise NotARegularFileError(f"{path} is a {kind}, not a regular file")
+
+
+def open_regular_file(path: Path) -> BinaryIO:
+    """``path`` opened for reading bytes, if it is a regular file (after symbolic links).
+
+    Checked with ``os.stat`` before opening and again on the open descriptor (opened without
+    blocking, so a FIFO swapped in meanwhile cannot hang it). Raises
+    :class:`NotARegularFileError` (a ``ValueError``) naming the path and its kind, ``OSError``
+    if it cannot be read.
+    """
+    _check_regular(path, os.stat(path).st_mode)
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    handle = os.fdopen(fd, "rb")
+    try:
+        _check_regular(path, os.fstat(fd).st_mode)
+    except BaseException:
+        handle.close()
+        raise
+    return handle
 
 
 def sha256_file(path: Path, chunk_bytes: int = 1 << 20) -> str:
-    """Hex SHA-256 of the file's bytes (read in chunks). Raises ``OSError`` if unreadable."""
+    """Hex SHA-256 of the file's bytes (read in chunks). Raises ``OSError`` if unreadable and
+    :class:`NotARegularFileError` for anything but a regular file."""
     digest = hashlib.sha256()
-    with path.open("rb") as handle:
+    with open_regular_file(path) as handle:
         while chunk := handle.read(chunk_bytes):
             digest.update(chunk)
     return digest.hexdigest()

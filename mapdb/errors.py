@@ -78,6 +78,16 @@ class BuildAbortedError(MapDatabaseError):
     """A build stopped early (a feature-extraction worker died); committed places are complete."""
 
 
+class InvalidValueError(MapDatabaseError, ValueError):
+    """A value the map refuses to store (a blank, too long or control-character name; a NaN or
+    infinite coordinate); a ``ValueError`` too."""
+
+
+class EmptyMapError(MapDatabaseError, ValueError):
+    """A map with nothing to localize against (no place, or none with the detector's
+    fingerprints); a ``ValueError`` too, as callers caught before."""
+
+
 class ManifestError(MapDatabaseError):
     """A dataset manifest that is missing, lacks a column, or has a malformed value."""
 

@@ -28,7 +28,7 @@ from mapdb.codec import (
     fingerprint_from_row,
 )
 from mapdb.database import MapDatabase
-from mapdb.errors import SchemaVersionError, translate_sqlite_error
+from mapdb.errors import EmptyMapError, translate_sqlite_error
 from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
 
 _SELECT = (
@@ -120,22 +120,17 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
 
 
 def open_for_reading(path: Path) -> MapDatabase:
-    """The map at ``path`` opened read-only; a map made by an older toploc is migrated first
-    (one write, as any writing command would do), so it still opens."""
-    try:
-        return MapDatabase.open(path, create=False, readonly=True)
-    except SchemaVersionError as error:
-        if "older" not in str(error):
-            raise
-    MapDatabase.open(path, create=False).close()  # migrates, or names why it cannot
+    """The map at ``path`` opened read-only, never written: on read-only media too, and a map
+    made by an older toploc is read through views of the current schema (see
+    :meth:`MapDatabase.open`)."""
     return MapDatabase.open(path, create=False, readonly=True)
 
 
 def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     """Read what a localizer needs from the map at ``path`` (read-only, then closed).
 
-    Raises ``ValueError`` if the map has no place with a ``detector`` fingerprint; database
-    errors are :class:`mapdb.errors.MapDatabaseError`.
+    Raises :class:`mapdb.errors.EmptyMapError` (a ``ValueError``) if the map has no place with
+    a ``detector`` fingerprint; every error is a :class:`mapdb.errors.MapDatabaseError`.
     """
     path = Path(path)
     with open_for_reading(path) as map_db:
@@ -145,7 +140,8 @@ def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
         edges = tuple(map_db.edges())
         likelihood = map_db.likelihood(detector)
     if not len(table.place_ids):
-        raise ValueError(f"map {path} has no place with a {detector!r} fingerprint")
+        what = "no places" if not places else f"no place with a {detector!r} fingerprint"
+        raise EmptyMapError(f"map {path} has {what}: build it first (toploc map build)", path)
     with_fingerprint = {int(p) for p in table.place_ids}
     kept = tuple(p for p in places if p.id in with_fingerprint)
     kept_rooms = tuple(r for r in rooms if any(p.room == r for p in kept))

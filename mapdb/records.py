@@ -7,6 +7,8 @@ Positions are in metres and headings in degrees, in the metric frame of the plac
 
 from __future__ import annotations
 
+import math
+import unicodedata
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -17,10 +19,47 @@ import numpy as np
 ParamValue = float | int | str | bool
 """A value of a fingerprint's extraction parameters."""
 
+MAX_NAME_CHARS = 128
+"""The longest name the map stores, in characters: room names, and every other name-like
+string (detector, camera model). A name appears in one-line messages, bus replies, GraphML and
+the belief's JSON; 128 is far above any real room name and far below what hurts them."""
+
+
+def _shown(text: str, chars: int = 24) -> str:
+    """``repr`` of ``text``, cut to ``chars`` characters for a one-line message."""
+    return repr(text) if len(text) <= chars else repr(text[:chars]) + "…"
+
+
+def check_name(name: str, what: str = "room name") -> str:
+    """``name`` if it is a usable name, else ``ValueError`` saying why (naming ``what``).
+
+    Usable: not blank, at most :data:`MAX_NAME_CHARS` characters, no control characters (a
+    newline would split a one-line message or a CSV row).
+    """
+    if not name.strip():
+        raise ValueError(f"{what} must not be empty, got {name!r}")
+    if len(name) > MAX_NAME_CHARS:
+        raise ValueError(
+            f"{what} {_shown(name)} has {len(name)} characters, more than {MAX_NAME_CHARS}"
+        )
+    if any(unicodedata.category(char) == "Cc" for char in name):
+        raise ValueError(f"{what} {_shown(name)} has a control character")
+    return name
+
+
+def check_finite(value: float | None, what: str) -> None:
+    """``ValueError`` naming ``what`` unless ``value`` is ``None`` (unknown) or finite."""
+    if value is not None and not math.isfinite(value):
+        raise ValueError(f"{what} must be a finite number or unknown, got {value!r}")
+
 
 @dataclass(frozen=True)
 class NewPlace:
-    """A panorama about to be added: where it was taken and where its image came from."""
+    """A panorama about to be added: where it was taken and where its image came from.
+
+    Raises ``ValueError`` for a room name :func:`check_name` refuses, a coordinate or heading
+    that is NaN or infinite, or a malformed hash: nothing unreadable reaches the map.
+    """
 
     room: str
     image_sha256: str
@@ -31,8 +70,10 @@ class NewPlace:
     captured_utc: str | None = None
 
     def __post_init__(self) -> None:
-        if not self.room.strip():
-            raise ValueError(f"room name must not be empty, got {self.room!r}")
+        check_name(self.room)
+        check_finite(self.x_m, "x_m")
+        check_finite(self.y_m, "y_m")
+        check_finite(self.heading_deg, "heading_deg")
         if len(self.image_sha256) != 64:
             raise ValueError(f"image_sha256 must be 64 hex digits, got {self.image_sha256!r}")
 

@@ -127,12 +127,20 @@ def _v2_camera(db: sqlite_utils.Database) -> None:
 MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera)
 SCHEMA_VERSION = len(MIGRATIONS)
 
+READ_ONLY_VIEWS: dict[Migration, str] = {
+    _v2_camera: "CREATE TEMP VIEW places AS SELECT *, 'cylinder' AS camera FROM main.places",
+}
+"""For a migration, the SQL that shows its result to a read-only connection without writing:
+a ``TEMP`` view (kept in memory) named like the table it shadows. A map too old to have one
+for every missing migration must be opened for writing once, which migrates it."""
+
 
 def read_schema_version(db: sqlite_utils.Database) -> int | None:
     """The schema version of ``db``: 0 for an empty file, ``None`` if it is not a toploc map.
 
     "Not a map" means other tables exist but no ``meta`` table, or ``meta`` lacks a valid
-    version. Reads only; raises ``sqlite3.DatabaseError`` if the file is not SQLite.
+    version (missing, NULL, not a whole number, or negative). Reads only; raises
+    ``sqlite3.DatabaseError`` if the file is not SQLite.
     """
     names = db.table_names()
     if META_TABLE not in names:
@@ -141,9 +149,10 @@ def read_schema_version(db: sqlite_utils.Database) -> int | None:
     if not rows:
         return None
     try:
-        return int(rows[0]["value"])
-    except ValueError:
+        version = int(rows[0]["value"])
+    except (TypeError, ValueError):  # NULL, a blob or text that is not a number
         return None
+    return version if version >= 0 else None
 
 
 def migrate(db: sqlite_utils.Database, migrations: Sequence[Migration] = MIGRATIONS) -> int:

@@ -5,20 +5,112 @@ OpenCV, whose thread pool is running, and a forked child inherits the locks thos
 but not the threads, so it can deadlock on its first OpenCV call. A spawned child starts a fresh
 interpreter and imports what it needs, so the work submitted to the pool must be picklable (a
 module-level function, or a ``functools.partial`` of one).
+
+Workers die with their parent, ``kill -9`` included: on Linux the kernel sends them ``SIGKILL``
+when the parent ends (``prctl(PR_SET_PDEATHSIG)``), and on every system a watcher thread in each
+worker ends it once its parent pid changes (the parent is gone, the worker was re-parented).
+Linux counts the *thread* that started a worker as its parent, and a ``ProcessPoolExecutor``
+starts workers in the thread that calls ``submit``: submit from a thread that outlives the pool
+(the main thread, as every caller does).
+Workers ignore ``SIGINT``: Ctrl-C in a terminal reaches the whole process group, and the parent
+alone decides what an interrupt means (it stops the pool, see :func:`stop_workers`).
 """
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
+from types import TracebackType
+
+PR_SET_PDEATHSIG = 1
+"""``prctl`` option: the signal the kernel sends a process when its parent ends (Linux)."""
+
+PARENT_POLL_S = 0.2
+"""How often a worker's watcher thread checks that its parent is still alive, seconds."""
 
 
-def spawn_process_pool(max_workers: int) -> ProcessPoolExecutor:
-    """A ``ProcessPoolExecutor`` of ``max_workers`` (>= 1) processes started with *spawn*.
+def _set_parent_death_signal() -> None:
+    """Ask the Linux kernel to ``SIGKILL`` this process when its parent ends (no-op elsewhere)."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass  # the watcher thread still ends the worker
+
+
+def _watch_parent(parent_pid: int, poll_s: float) -> None:
+    """End this process at once when its parent is no longer ``parent_pid``."""
+    while os.getppid() == parent_pid:
+        time.sleep(poll_s)
+    os._exit(1)
+
+
+def init_worker(parent_pid: int) -> None:
+    """Initializer of every pool worker: die with the parent, leave Ctrl-C to it.
+
+    ``parent_pid`` is the pool owner's pid, read before the worker started: a parent that died
+    before this runs is noticed too.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _set_parent_death_signal()
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    watcher = threading.Thread(
+        target=_watch_parent, args=(parent_pid, PARENT_POLL_S), name="parent-watch", daemon=True
+    )
+    watcher.start()
+
+
+def stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Stop ``pool`` now: cancel what is queued and kill the workers mid-task (results lost).
+
+    For an interrupt or an error, when nothing more is wanted from the pool; the workers are
+    reaped by the pool's own thread (at the latest at interpreter exit).
+    """
+    processes = dict(getattr(pool, "_processes", None) or {})
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes.values():
+        try:
+            process.kill()
+        except (ProcessLookupError, ValueError):
+            continue  # already gone, or already closed
+
+
+class WorkerPool(ProcessPoolExecutor):
+    """A spawned ``ProcessPoolExecutor`` whose ``with`` block kills its workers on an error or
+    interrupt instead of waiting for every queued task."""
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc_val: BaseException | None,
+        exc_tb: TracebackType | None,
+    ) -> bool | None:
+        if exc_type is not None:
+            stop_workers(self)
+        return super().__exit__(exc_type, exc_val, exc_tb)
+
+
+def spawn_process_pool(max_workers: int) -> WorkerPool:
+    """A process pool of ``max_workers`` (>= 1) workers started with *spawn*.
 
     Spawn, not fork: a fork after OpenCV started its threads can hang the child (see the module
-    docstring). Raises ``ValueError`` for ``max_workers < 1``.
+    docstring). The workers die with this process and ignore Ctrl-C (:func:`init_worker`).
+    Raises ``ValueError`` for ``max_workers < 1``.
     """
     if max_workers < 1:
         raise ValueError(f"max_workers must be at least 1, got {max_workers}")
-    return ProcessPoolExecutor(max_workers, mp_context=multiprocessing.get_context("spawn"))
+    return WorkerPool(
+        max_workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=init_worker,
+        initargs=(os.getpid(),),
+    )

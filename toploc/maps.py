@@ -22,6 +22,7 @@ from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import MANIFEST_NAME, read_edges, read_manifest
+from mapdb.errors import EmptyMapError
 from mapdb.graph import connect_known_rooms
 from mapdb.loading import load_snapshot
 from robot.dataset import render_dataset
@@ -37,8 +38,9 @@ def load_map(
     db_path: Path | str, detector: str = "sift", use_index: bool | None = None
 ) -> LoadedMap:
     """The map at ``db_path`` ready for a :class:`localizer.localizer.Localizer` (read once, the
-    database closed again). Raises ``ValueError`` if it has no ``detector`` fingerprint and
-    :class:`mapdb.errors.MapDatabaseError` for a missing, locked or damaged file."""
+    database closed again). Raises :class:`mapdb.errors.MapDatabaseError` with a one-line
+    message for a map without ``detector`` fingerprints (``EmptyMapError``, also a
+    ``ValueError``) and for a missing, locked or damaged file."""
     return LoadedMap.from_snapshot(load_snapshot(db_path, detector), use_index)
 
 
@@ -76,7 +78,9 @@ def kidnapped_robot(
     with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
         places = map_db.places()
     if not places:
-        raise ValueError(f"map {db_path} has no places")
+        raise EmptyMapError(
+            f"map {db_path} has no places: build it first (toploc map build)", db_path
+        )
     camera = PanoramaCamera(
         places[0].image_width_px, places[0].image_height_px, height_m=world.camera_height_m
     )

@@ -52,14 +52,30 @@ def test_rerun_skips_every_image_and_says_so(make_dataset, map_db: MapDatabase) 
     assert len(map_db.places()) == 5
 
 
-def test_repeated_image_in_one_dataset_is_skipped(make_dataset, map_db: MapDatabase) -> None:
+def test_exact_repeat_of_an_image_is_skipped_with_a_warning(
+    make_dataset, map_db: MapDatabase
+) -> None:
+    folder = make_dataset(2)
+    manifest = folder / "manifest.csv"
+    manifest.write_text(manifest.read_text() + "img/pano_001.png,hall,0.5,-0.25,10.0\n")
+    report = build_map(map_db, read_manifest(folder), EXTRACT, workers=0, progress=False)
+    assert (report.count(Status.ADDED), report.count(Status.SKIPPED)) == (2, 1)
+    (skipped,) = [o for o in report.outcomes if o.status is Status.SKIPPED]
+    assert skipped.warning
+    assert "line 4: exact duplicate of line 3" in skipped.message
+
+
+def test_same_image_in_two_rooms_fails_both_rows(make_dataset, map_db: MapDatabase) -> None:
     folder = make_dataset(2)
     manifest = folder / "manifest.csv"
     manifest.write_text(manifest.read_text() + "img/pano_001.png,office,,,\n")
     report = build_map(map_db, read_manifest(folder), EXTRACT, workers=0, progress=False)
-    assert (report.count(Status.ADDED), report.count(Status.SKIPPED)) == (2, 1)
-    (skipped,) = [o for o in report.outcomes if o.status is Status.SKIPPED]
-    assert "same image as img/pano_001.png" in skipped.message
+    assert (report.count(Status.ADDED), report.count(Status.FAILED)) == (1, 2)
+    messages = sorted(o.message for o in report.outcomes if o.status is Status.FAILED)
+    assert messages[0].startswith("line 3: same image as line 4 (img/pano_001.png)")
+    assert messages[1].startswith("line 4: same image as line 3 (img/pano_001.png)")
+    assert "conflicting duplicates" in messages[0]
+    assert [p.room for p in map_db.places()] == ["kitchen"]
 
 
 @pytest.mark.parametrize("workers", [0, 2])

@@ -2,7 +2,7 @@
 
 Every :class:`~mapdb.errors.MapDatabaseError` becomes a one-line ``Error: ...`` and exit status
 1. ``map build`` exits 1 if any image failed (the others are imported) and 130 if interrupted
-(the map stays consistent; re-running completes it). Also runnable as
+by Ctrl-C or ``SIGTERM`` (the map stays consistent; re-running completes it). Also runnable as
 ``python -m toploc.commands.map``.
 
 Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.panorama_io`` +
@@ -12,8 +12,11 @@ Feature extraction is :func:`toploc.extraction.extract_panorama` (``localizer.pa
 from __future__ import annotations
 
 import json
+import math
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,10 +27,16 @@ from tqdm import tqdm
 from localizer.likelihood import RatioLikelihood
 from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
-from mapdb.dataset import EDGES_NAME, ManifestEntry, read_edges, read_manifest
+from mapdb.dataset import (
+    EDGES_NAME,
+    ManifestEntry,
+    check_edge_rooms,
+    read_edge_rows,
+    read_manifest,
+)
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import MapInfo
+from mapdb.records import MapInfo, check_name
 from toploc.commands.options import camera_option
 from toploc.extraction import resolve_extractor
 
@@ -61,9 +70,30 @@ def _map_errors() -> Iterator[None]:
         raise click.ClickException(str(error)) from error
 
 
+def _raise_interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, ``SIGTERM`` stops the command as Ctrl-C does (a KeyboardInterrupt: the
+    build ends cleanly, its workers stopped, exit 130). Left alone if a handler is set already
+    (e.g. by the CLI) or outside the main thread."""
+    in_main = threading.current_thread() is threading.main_thread()
+    if not in_main or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def _log_outcome(outcome: Outcome, verbose: bool) -> None:
-    """Failures always, one line each, under the progress bar; the rest with ``--verbose``."""
-    if outcome.status is Status.FAILED or verbose:
+    """Failures and warnings always, one line each, under the progress bar; the rest with
+    ``--verbose``."""
+    if outcome.status is Status.FAILED or outcome.warning or verbose:
         tqdm.write(outcome.describe(), file=sys.stderr)
 
 
@@ -121,6 +151,16 @@ def map_group() -> None:
 )
 @camera_option
 @calibrate_option
+@click.option(
+    "--allow-outside",
+    is_flag=True,
+    help="Import manifest images that lie outside DATASET (absolute paths, '..', symlinks).",
+)
+@click.option(
+    "--create-rooms",
+    is_flag=True,
+    help="Create the rooms edges.csv names that have no panorama (an error otherwise).",
+)
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 @click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
 def build_command(
@@ -130,6 +170,8 @@ def build_command(
     workers: int,
     camera: str,
     calibrate: bool,
+    allow_outside: bool,
+    create_rooms: bool,
     progress: bool,
     verbose: bool,
 ) -> None:
@@ -137,12 +179,18 @@ def build_command(
 
     Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
     An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
+    Only regular files inside DATASET are read (see --allow-outside); a room of edges.csv must
+    be in the manifest or the map (see --create-rooms).
     """
     presets = parse_detectors(detectors)
-    with _map_errors():
-        entries = read_manifest(dataset)
-        edges = read_edges(dataset)
+    with _sigterm_as_interrupt(), _map_errors():
+        entries = read_manifest(dataset, allow_outside=allow_outside)
+        edge_rows = read_edge_rows(dataset)
+        edges = [(a, b) for a, b, _ in edge_rows]
         with MapDatabase.open(db_path) as map_db:
+            if not create_rooms:
+                known = {entry.room for entry in entries} | {r.name for r in map_db.rooms()}
+                check_edge_rooms(dataset, edge_rows, known)
             report = build_map(
                 map_db,
                 entries,
@@ -152,6 +200,8 @@ def build_command(
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
             )
             if not report.interrupted:
+                for room in {room for edge in edges for room in edge} if create_rooms else ():
+                    map_db.add_room(room)
                 added = connect_known_rooms(map_db, edges)
                 if added:
                     click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
@@ -184,8 +234,13 @@ def add_command(
     """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
     if (x_m is None) != (y_m is None):
         raise click.UsageError("give both --x-m and --y-m, or neither")
-    if not room.strip():
-        raise click.BadParameter("must not be empty", param_hint="--room")
+    for hint, value in (("--x-m", x_m), ("--y-m", y_m), ("--heading-deg", heading_deg)):
+        if value is not None and not math.isfinite(value):
+            raise click.ClickException(f"{hint} must be a finite number, got {value}")
+    try:
+        check_name(room.strip())
+    except ValueError as error:
+        raise click.ClickException(f"--room: {error}") from None
     presets = parse_detectors(detectors)
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:

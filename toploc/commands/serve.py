@@ -13,6 +13,7 @@ import click
 from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
+from mapdb.errors import MapDatabaseError
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusError
 from toploc.bus_config import bus_config
@@ -102,13 +103,11 @@ def serve(
     click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
     warn_if_exposed(config)
     db = db_path or ensure_world_map(sim_world)
-    robot = None
-    if not no_sim:
-        robot = kidnapped_robot(make_world(sim_world), sim_room, seed, db)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
+        robot = None if no_sim else kidnapped_robot(make_world(sim_world), sim_room, seed, db)
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
         with start_service(db, config, robot, policy, localizer_config, limits):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
@@ -118,6 +117,6 @@ def serve(
                 "Ctrl-C stops."
             )
             stop.wait()
-    except BusError as error:
+    except (BusError, MapDatabaseError) as error:  # one line naming the bus or the map
         raise click.ClickException(str(error)) from error
     click.echo("stopped")
