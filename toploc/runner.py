@@ -163,10 +163,11 @@ class LocalizationRunner:
         """End the running localization at its next capture or move, refuse new ones, and wait
         up to ``wait_s`` seconds for it to end; whether it did."""
         self._stopping.set()
-        try:
-            self.robot.stop()  # a move in progress returns early
-        except Exception as error:  # stopping must go on whatever the base says
-            _log.warning("could not stop the robot: %s", error)
+        if self._run_lock.locked():
+            try:
+                self.robot.stop()  # a move in progress returns early
+            except Exception as error:  # stopping must go on whatever the base says
+                _log.warning("could not stop the robot: %s", error)
         ended = self._run_lock.acquire(timeout=wait_s)
         if ended:
             self._run_lock.release()

@@ -17,6 +17,7 @@ import zenoh
 
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Robot
+from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
 from toploc.maps import load_map
@@ -60,7 +61,10 @@ def start_service(
         stack.enter_context(MapNode(session, robot_id, db_path))
         if robot is not None:
             stack.enter_context(RobotNode(session, robot_id, robot, limits))
-        remote = RemoteRobot(session, robot_id)
+        remote = RemoteRobot(
+            session, robot_id, move_timeout_s=limits.move_timeout_s + bus.DEFAULT_TIMEOUT_S,
+            max_image_pixels=limits.max_image_pixels,
+        )  # fmt: skip
         stack.callback(remote.close)
         runner = LocalizationRunner(
             localizer, remote, policy, max_pending=limits.max_pending_localizations

@@ -71,6 +71,9 @@ class FakeRobot:
     def odometry(self) -> Odometry:
         return Odometry(0.0, 0.0, 0.0)
 
+    def stop(self) -> None:
+        """Moves are instantaneous here: nothing to stop."""
+
 
 class Files:
     """The README's service file, a user's file per user, and the same service without ACL."""

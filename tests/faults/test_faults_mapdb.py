@@ -385,11 +385,12 @@ def test_a_wal_map_on_read_only_media_is_served(read_only_map: tuple[Path, Path]
     )
     try:
         assert process.stdout is not None
-        first_line = process.stdout.readline()  # "serving ..." once the map is loaded
+        process.stdout.readline()  # "robot id: ..."
+        serving = process.stdout.readline()  # "serving ..." once the map is loaded
     finally:
         process.send_signal(signal.SIGINT)
         _, stderr = process.communicate(timeout=30)
-    assert first_line.startswith(f"serving {db_path}"), first_line + stderr
+    assert serving.startswith(f"serving {db_path}"), serving + stderr
 
 
 @read_only_possible

@@ -231,9 +231,10 @@ class RemoteRobot:
     :class:`RobotNode`.
 
     ``timeout_s`` bounds capture and odometry queries, ``move_timeout_s`` a move (it replies
-    when done). Every call raises :class:`~toploc.bus.BusTimeout` if the node does not answer,
+    when done), ``max_image_pixels`` a captured image (checked in its header). Every call
+    raises :class:`~toploc.bus.BusTimeout` if the node does not answer,
     :class:`~toploc.bus.BusReplyError` for an error reply, :class:`~toploc.bus.BusMessageError`
-    for a reply that breaks the contract (e.g. a corrupt image).
+    for a reply that breaks the contract (e.g. a corrupt or oversized image).
     """
 
     def __init__(
@@ -242,11 +243,13 @@ class RemoteRobot:
         robot_id: str,
         timeout_s: float = bus.DEFAULT_TIMEOUT_S,
         move_timeout_s: float = 60.0,
+        max_image_pixels: int = MAX_IMAGE_PIXELS,
     ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
         self.timeout_s = timeout_s
         self.move_timeout_s = move_timeout_s
+        self.max_image_pixels = max_image_pixels
         self.last_capture_meta: dict[str, Any] | None = None
         self._odom_lock = threading.Lock()
         self._last_odom: tuple[float, Odometry] | None = None  # (stamp_s, odometry)
@@ -280,7 +283,7 @@ class RemoteRobot:
         if sample.attachment is None:
             raise bus.BusMessageError(f"{key_expr}: reply has no capture attachment")
         meta = bus.decode(f"{key_expr} (attachment)", sample.attachment.to_bytes(), CAPTURE_FIELDS)
-        image = decode_png(key_expr, sample.payload.to_bytes())
+        image = decode_png(key_expr, sample.payload.to_bytes(), self.max_image_pixels)
         self.last_capture_meta = meta
         return Capture(image=image, stamp_s=float(meta["stamp"]), source=meta["source"])
 
