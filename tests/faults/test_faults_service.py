@@ -4,9 +4,11 @@ abandoned queries run in turn, ...)."""
 
 import math
 import re
+import sqlite3
 import threading
 import time
 
+import cv2
 import numpy as np
 import pytest
 from bus_helpers import ROBOT_ID, wait_for
@@ -14,7 +16,9 @@ from bus_helpers import ROBOT_ID, wait_for
 from localizer.belief import BeliefFilter
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Odometry
+from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
+from mapdb.records import Fingerprint, NewPlace
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
@@ -22,7 +26,8 @@ from robot.worlds import make_world
 from toploc import bus
 from toploc.limits import Limits, RateLimit, load_limits
 from toploc.nodes.localizer import LocalizerClient, LocalizerNode
-from toploc.nodes.robot import RemoteRobot, RobotNode
+from toploc.nodes.mapdb import MapNode
+from toploc.nodes.robot import RemoteRobot, RobotNode, decode_png
 from toploc.runner import LocalizationDroppedError, LocalizationRunner
 
 
@@ -263,3 +268,28 @@ def test_a_bad_limits_file_is_named_in_one_line(tmp_path, text, message):
     with pytest.raises(ValueError, match=re.escape(message)) as err:
         load_limits(path)
     assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
+
+
+# --- map/places ------------------------------------------------------------------------------
+
+
+def test_a_place_stored_with_an_infinite_position_is_served_as_null(zbus, tmp_path):
+    """Before: one inf (stored by an older toploc) made ``map/places`` fail for every client."""
+    db_path = tmp_path / "map.db"
+    with MapDatabase.open(db_path) as map_db:
+        place = NewPlace("office_a", "ab" * 32, "a.png", x_m=1.0, y_m=2.0, heading_deg=90.0)
+        map_db.add_place(place, [Fingerprint.empty("sift", 96, 24)])
+    with sqlite3.connect(db_path) as raw:  # what the write path now refuses
+        raw.execute("UPDATE places SET x_m = 9e999")
+    raw.close()
+    with MapNode(zbus.server, ROBOT_ID, db_path):
+        zbus.wait_alive("mapdb")
+        key_expr = bus.key(ROBOT_ID, bus.MAP_PLACES)
+        places = bus.request_json(zbus.client, key_expr, {"places": list}, None, 2.0)["places"]
+    assert [(p["x_m"], p["y_m"]) for p in places] == [(None, 2.0)]
+
+
+def test_an_oversized_capture_is_refused_from_its_header():
+    png = cv2.imencode(".png", np.zeros((4000, 20000), np.uint8))[1].tobytes()  # 80 MP, a few kB
+    with pytest.raises(bus.BusMessageError, match="image is 20000x4000 px; at most 75000000"):
+        decode_png("camera/capture", png)

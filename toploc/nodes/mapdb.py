@@ -13,6 +13,7 @@ rebuilt while the node runs is thus served fresh. A map error becomes an error r
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,15 @@ from mapdb.database import MapDatabase
 from toploc import bus
 
 NODE_NAME = "mapdb"
+
+
+def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
+    """``fields`` with non-finite numbers as None (JSON null): a map written before non-finite
+    poses were refused may hold one, and strict JSON has no NaN or inf."""
+    return {
+        name: None if isinstance(value, float) and not math.isfinite(value) else value
+        for name, value in fields.items()
+    }
 
 
 class MapNode:
@@ -71,7 +81,7 @@ class MapNode:
                 bus.check_fields(self.key(bus.MAP_PLACES), request, {"room": str})
                 room = request["room"]
         with self._open() as map_db:
-            places = [asdict(place) for place in map_db.places(room)]
+            places = [_json_safe(asdict(place)) for place in map_db.places(room)]
         return bus.Reply(bus.encode("places", {"places": places}))
 
     def _on_edges(self, _payload: bytes | None) -> bus.Reply:
