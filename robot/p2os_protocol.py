@@ -18,8 +18,8 @@ Matched against (reference only, nothing copied):
 * command numbers and argument types (0x3B positive int, 0x1B negative int, 0x2B string, then the
   2-byte little-endian magnitude): ARIA ``ArCommands.h`` and p2os ``robot_params.hpp``;
 * the standard SIP's field order: p2os ``SIP::ParseStandard`` (``p2os_driver/src/sip.cpp``).
-  p2os masks the position with ``0xEFFF`` and wraps at 4096; we keep the manual's 15 low bits
-  (wrap at 32768), which is what the mask was meant to be.
+  p2os masks the position with ``0xEFFF`` and unwraps it modulo 4096; we keep the 15 low bits
+  (``0x7FFF``, unwrapped modulo 32768) as the operations manual describes x and y.
 
 Units: firmware units in the ``*Raw`` records and the command builders (mm, mm/s, deg, deg/s,
 tenths of volts, 4096 angle units per revolution); SI in :class:`StandardSip` (m, rad, m/s, V).
