@@ -137,9 +137,10 @@ def test_pairwise_shift_on_real_roofs_pair_matches_the_homography(flip: bool) ->
     # the tilt breaks the thesis's rule 2 for a level PTU (|dy| <= 10 px) ...
     shift = pairwise_shift(a, b, f, pan_rad)
     assert not shift.accepted and "beyond" in shift.reason
-    # ... allowing for it (the pan-only default is off by 30 px too), the vote is accepted and lands near the homography's shift; the tilt
-    # makes the shift vary over the overlap, the vote takes its densest part (measured: dx 14
-    # and 13 px short of the overlap centre's 315 px, dy within 1 px)
+    # ... allowing for it (the pan-only default is off by 30 px too), the vote is accepted
+    # and lands near the homography's shift. The tilt makes the shift vary over the overlap and
+    # the vote takes its densest part (measured: dx 14 and 13 px short of the overlap centre's
+    # 315 px, dy within 1 px).
     tilted = VotingRules(max_dx_error_px=60.0, max_dy_error_px=100.0)
     shift = pairwise_shift(a, b, f, pan_rad + math.radians(2.0), tilted)  # a PTU 2° off
     assert shift.accepted, shift.reason
