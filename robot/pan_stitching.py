@@ -121,8 +121,8 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 def sift_features(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """SIFT keypoint positions (n, 2) and descriptors of a photo."""
-    keypoints, descriptors = cv2.SIFT_create().detectAndCompute(_grey(image), None)
-    return np.float64([k.pt for k in keypoints]).reshape(-1, 2), descriptors
+    keypoints, descriptors = cv2.SIFT.create().detectAndCompute(_grey(image), None)
+    return np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2), descriptors
 
 
 def ratio_matches(
@@ -176,10 +176,10 @@ def pairwise_shift(
             f"voted ({dx:.1f}, {dy:.1f}) px is beyond ±({max_dx:g}, {max_dy:g}) of the "
             f"default ({default:.1f}, 0)"
         )
-    voted = (None, None) if votes == 0 else (float(dx), float(dy))
+    voted_dx, voted_dy = (None, None) if votes == 0 else (float(dx), float(dy))
     if reason:
-        return PairShift(default, 0.0, False, votes, len(pa), *voted, reason)
-    return PairShift(float(dx), float(dy), True, votes, len(pa), *voted)
+        return PairShift(default, 0.0, False, votes, len(pa), voted_dx, voted_dy, reason)
+    return PairShift(float(dx), float(dy), True, votes, len(pa), voted_dx, voted_dy)
 
 
 def warp_to_cylinder(image: np.ndarray, focal_px: float) -> tuple[np.ndarray, np.ndarray, int, int]:
