@@ -16,7 +16,7 @@ from pathlib import Path
 import zenoh
 
 from localizer.localizer import Localizer, LocalizerConfig
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Camera, Robot
 from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
@@ -45,8 +45,10 @@ def start_service(
     policy: str = "separating",
     localizer_config: LocalizerConfig | None = None,
     limits: Limits | None = None,
+    camera: Camera | None = None,
 ) -> Iterator[Service]:
-    """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``.
+    """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
+    robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
 
     On exit a running localization is ended (at its next capture or move), then everything is
     undeclared and the session closed (an unclosed session keeps the process alive).
@@ -60,7 +62,7 @@ def start_service(
         session = stack.enter_context(open_session(config))
         stack.enter_context(MapNode(session, robot_id, db_path))
         if robot is not None:
-            stack.enter_context(RobotNode(session, robot_id, robot, limits))
+            stack.enter_context(RobotNode(session, robot_id, robot, limits, camera))
         remote = RemoteRobot(
             session, robot_id, move_timeout_s=limits.move_timeout_s + bus.DEFAULT_TIMEOUT_S,
             max_image_pixels=limits.max_image_pixels,
