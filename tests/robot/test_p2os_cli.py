@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -35,7 +36,7 @@ def test_robot_specs() -> None:
     assert parse_robot_spec("p2os-sim") == ("p2os-sim", None)
     assert parse_robot_spec("p2os:/dev/ttyUSB0") == ("p2os", "/dev/ttyUSB0")
     for bad in ("p2os:", "pioneer", ""):
-        with pytest.raises(ValueError, match="a robot is sim | p2os-sim | p2os:PORT"):
+        with pytest.raises(ValueError, match=re.escape("a robot is sim | p2os-sim | p2os:PORT")):
             parse_robot_spec(bad)
 
 
