@@ -17,7 +17,8 @@ from localizer.policy import POLICIES
 from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError, open_source
-from robot.worlds import WORLD_NAMES, make_world
+from robot.p2os_base import P2osError
+from robot.worlds import WORLD_NAMES
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
 from toploc.bus_config import bus_config
 from toploc.commands.options import (
@@ -27,8 +28,17 @@ from toploc.commands.options import (
     zenoh_config_option,
 )
 from toploc.limits import Limits, load_limits
-from toploc.maps import ensure_world_map, kidnapped_robot
+from toploc.maps import ensure_world_map
+from toploc.robots import ROBOT_SPECS, open_robot, parse_robot_spec
 from toploc.service import start_service
+
+
+def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
+    try:
+        parse_robot_spec(value)
+    except ValueError as error:
+        raise click.BadParameter(str(error)) from None
+    return value
 
 
 @click.command("serve")
@@ -72,6 +82,15 @@ from toploc.service import start_service
     "--no-sim", is_flag=True, help="No simulated robot: drive the robot node already on the bus."
 )
 @click.option(
+    "--robot",
+    "robot_spec",
+    default="sim",
+    show_default=True,
+    callback=_check_robot_spec,
+    help=f"{ROBOT_SPECS}: the simulated robot, a P2OS simulator in this process driven over "
+    "the serial protocol (the sim camera at its true pose), or a Pioneer on serial port PORT.",
+)
+@click.option(
     "--limits",
     "limits_path",
     type=click.Path(dir_okay=False, exists=True, path_type=Path),
@@ -103,6 +122,7 @@ def serve(
     sim_room: str,
     seed: int,
     no_sim: bool,
+    robot_spec: str,
     camera: str,
     source: str,
     limits_path: Path | None,
@@ -131,8 +151,8 @@ def serve(
             except CameraError as error:
                 raise click.ClickException(f"--source: {error}") from None
             stack.callback(getattr(capture_from, "close", lambda: None))
-        _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, camera, limits,
-               source, capture_from)  # fmt: skip
+        _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, robot_spec, camera,
+               limits, source, capture_from)  # fmt: skip
     click.echo("stopped")
 
 
@@ -144,6 +164,7 @@ def _serve(
     sim_room: str,
     seed: int,
     no_sim: bool,
+    robot_spec: str,
     camera: str,
     limits: Limits,
     source: str,
@@ -155,16 +176,18 @@ def _serve(
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    spec = None if no_sim else robot_spec
     try:
-        robot = None if no_sim else kidnapped_robot(make_world(sim_world), sim_room, seed, db)
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
-        with start_service(db, config, robot, policy, localizer_config, limits, capture_from):
-            where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
+        with (
+            open_robot(spec, sim_world, sim_room, seed, db) as (robot, where),
+            start_service(db, config, robot, policy, localizer_config, limits, capture_from),
+        ):
             click.echo(
                 f"serving {db} as toploc/{robot_id}/** ({config.mode}, listen "
                 f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}; "
                 f"camera: {source}. Ctrl-C stops."
             )
             stop.wait()
-    except (BusError, MapDatabaseError) as error:  # one line naming the bus or the map
+    except (BusError, MapDatabaseError, P2osError) as error:  # one line naming what failed
         raise click.ClickException(str(error)) from error

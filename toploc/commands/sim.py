@@ -8,6 +8,7 @@ from __future__ import annotations
 import click
 
 from toploc.commands.sim_kidnap import kidnap
+from toploc.commands.sim_p2os import p2os
 
 
 @click.group(name="sim")
@@ -16,3 +17,4 @@ def sim_group() -> None:
 
 
 sim_group.add_command(kidnap)
+sim_group.add_command(p2os)

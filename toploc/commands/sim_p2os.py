@@ -1,0 +1,80 @@
+"""``toploc sim p2os``: a simulated Pioneer base speaking P2OS/ARCOS on a pseudo-terminal, for
+trying the serial path without a robot (issue 12). Prints the port to connect to, runs until
+Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from pathlib import Path
+
+import click
+import numpy as np
+
+from robot.p2os_sim import P2osSimulator, SimFaults
+from robot.sim_robot import Obstacles, random_free_pose
+from robot.worlds import WORLD_NAMES, make_world
+
+FAULTS = ("garbage", "truncated", "checksum", "mute")
+
+
+def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
+    """The :class:`SimFaults` for ``names`` (of :data:`FAULTS`), each on every ``every``-th SIP."""
+    return SimFaults(
+        mute_handshake="mute" in names,
+        garbage_every=every if "garbage" in names else 0,
+        truncate_every=every if "truncated" in names else 0,
+        bad_checksum_every=every if "checksum" in names else 0,
+    )
+
+
+@click.command("p2os")
+@click.option("--world", type=click.Choice(WORLD_NAMES), default="building", show_default=True)
+@click.option("--room", default="office_b", show_default=True, help="Where the base starts.")
+@click.option("--seed", type=int, default=1, show_default=True, help="Seeds the start pose.")
+@click.option(
+    "--link",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also make this symlink to the pty (a stable port name).",
+)
+@click.option(
+    "--fault",
+    "faults",
+    type=click.Choice(FAULTS),
+    multiple=True,
+    help="Inject a fault (repeatable): garbage bytes, truncated or bad-checksum SIPs (every "
+    "--fault-every-th SIP), or a mute handshake.",
+)
+@click.option("--fault-every", type=click.IntRange(min=1), default=10, show_default=True)
+@click.option("--time-scale", type=click.FloatRange(min=0.1, max=20), default=1.0)
+def p2os(
+    world: str,
+    room: str,
+    seed: int,
+    link: Path | None,
+    faults: tuple[str, ...],
+    fault_every: int,
+    time_scale: float,
+) -> None:
+    """Run a simulated Pioneer base on a pseudo-terminal until interrupted."""
+    built = make_world(world)
+    try:
+        pose = random_free_pose(Obstacles.of(built, 0.2), room, np.random.default_rng([seed, 13]))
+    except ValueError as error:
+        raise click.ClickException(f"--room {room!r}: {error}") from error
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    sim = P2osSimulator(
+        built, pose, time_scale=time_scale, link=link, faults=simulator_faults(faults, fault_every)
+    )
+    with sim:
+        click.echo(f"port: {sim.port}")
+        click.echo(
+            f"a simulated Pioneer in {world}/{room} at ({pose.x_m:.2f}, {pose.y_m:.2f}) m; "
+            f"connect with: toploc serve --robot p2os:{sim.port}. Ctrl-C stops."
+        )
+        stop.wait()
+    click.echo("stopped")

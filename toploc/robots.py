@@ -1,0 +1,71 @@
+"""The robot ``toploc serve`` serves, by ``--robot`` spec (issue 12):
+
+- ``sim``: the simulated robot (:class:`robot.sim_robot.SimulatedRobot`), kidnapped in the world;
+- ``p2os-sim``: a P2OS simulator in this process on a pty, driven through the real serial
+  protocol (:class:`robot.p2os_base.P2osBase`), with a sim camera rendering at the simulated
+  base's true pose: the whole loop over the real protocol;
+- ``p2os:PORT``: a real Pioneer base on serial port ``PORT``. It has no camera of its own: the
+  service captures from ``--source`` (:mod:`robot.camera_sources`); without one, captures are
+  errors, motion and odometry work.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+
+from localizer.robot_protocol import Robot
+from robot.p2os_base import P2osBase
+from robot.p2os_robot import BaseWithCamera, NoCamera, SimCamera
+from robot.p2os_sim import P2osSimulator
+from robot.worlds import make_world
+from toploc.maps import kidnapped_robot
+
+ROBOT_SPECS = "sim | p2os-sim | p2os:PORT"
+
+
+def parse_robot_spec(spec: str) -> tuple[str, str | None]:
+    """``(kind, port)`` of a ``--robot`` spec; ``ValueError`` naming it otherwise."""
+    if spec in ("sim", "p2os-sim"):
+        return spec, None
+    if spec.startswith("p2os:") and len(spec) > len("p2os:"):
+        return "p2os", spec[len("p2os:") :]
+    raise ValueError(f"a robot is {ROBOT_SPECS}, got {spec!r}")
+
+
+@contextmanager
+def open_robot(
+    spec: str | None, world: str, room: str, seed: int, db_path: Path
+) -> Iterator[tuple[Robot | None, str]]:
+    """The robot of ``spec`` and a description of it (``None``: no robot, the bus's robot node
+    is driven); a base is closed on exit. :class:`robot.p2os_base.P2osError` if a base does not
+    connect."""
+    if spec is None:
+        yield None, "the bus's robot node"
+        return
+    kind, port = parse_robot_spec(spec)
+    with ExitStack() as stack:
+        if kind == "p2os" and port is not None:
+            base = P2osBase(port)
+            base.connect()
+            stack.callback(base.close)
+            where = f"the Pioneer on {port} ({', '.join(base.robot_strings)})"
+            yield BaseWithCamera(base, NoCamera(f"the base on {port}")), where
+            return
+        sim_robot = kidnapped_robot(make_world(world), room, seed, db_path)
+        if kind == "sim":
+            yield sim_robot, f"{world}/{room}"
+            return
+        sim = stack.enter_context(P2osSimulator(sim_robot.world, sim_robot.true_pose, seed=seed))
+        base = P2osBase(sim.port)
+        base.connect()
+        stack.callback(base.close)
+        camera = SimCamera(
+            sim_robot.world,
+            lambda: sim.true_pose,
+            sim_robot.camera,
+            sim_robot.condition,
+            seed=seed,
+        )
+        yield BaseWithCamera(base, camera), f"{world}/{room} over P2OS on {sim.port}"
