@@ -108,6 +108,9 @@ class MapRefresher:
         while not self._stop.is_set():
             self._wake.wait()
             self._wake.clear()
+            with self._lock:
+                if self._done >= self._changes:  # woken by changes the last round included
+                    continue
             changes = self._settled()
             if changes is None:
                 return

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -161,3 +162,42 @@ def test_a_read_only_map_refuses_the_add_clearly(service, client, monkeypatch):
     with pytest.raises(bus.BusReplyError, match="is read-only"):
         client.connect("kitchen", "corridor")
     assert n_places(db_path) == before
+
+
+class FakeRunner:
+    def __init__(self) -> None:
+        self.maps: list[object] = []
+
+    def replace_map(self, loaded: object) -> bool:
+        self.maps.append(loaded)
+        return True
+
+
+def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates(
+    building_map, monkeypatch
+):
+    from toploc import service as service_module
+
+    calls: list[str] = []
+    monkeypatch.setattr(service_module, "load_map", lambda path, detector: f"map {len(calls)}")
+    monkeypatch.setattr(service_module, "calibrate_map", lambda path, d: calls.append(d))
+    runner = FakeRunner()
+    refresher = service_module.MapRefresher(
+        building_map[0],
+        runner,
+        "sift",
+        settle_s=0.3,
+        recalibrate=True,  # type: ignore[arg-type]
+    )
+    try:
+        for _ in range(5):  # a burst of adds: one refresh after the last
+            refresher.changed()
+            time.sleep(0.05)
+        assert runner.maps == []
+        assert refresher.wait_idle(5)
+        assert calls == ["sift"]  # the map's one detector, once
+        assert runner.maps == ["map 0", "map 1"]  # the new places, then the new likelihood
+        refresher.changed()
+        assert refresher.wait_idle(5) and calls == ["sift", "sift"]
+    finally:
+        refresher.close()
