@@ -2,7 +2,9 @@
 
 The simulated robot (``robot.sim_robot``) and a real base (Pioneer over pyserial, with a
 camera) both provide :class:`Robot`; the active localizer and the Zenoh robot node use only
-this protocol.
+this protocol. A camera that is a device of its own (a 360° webcam, photos on a pan-tilt unit,
+a mirror camera; ``robot.camera_sources``) provides :class:`Camera`, and the robot node serves
+it beside the base.
 """
 
 from __future__ import annotations
@@ -40,6 +42,14 @@ class MoveResult:
     turned_rad: float
     moved_m: float
     bumped: bool
+
+
+class Camera(Protocol):
+    """A panoramic camera on its own: a robot is then a base plus a Camera."""
+
+    def capture(self) -> Capture:
+        """Take a panorama now; raise ``ValueError`` (one line naming the source) if it cannot."""
+        ...
 
 
 class Robot(Protocol):

@@ -26,7 +26,7 @@ import zenoh
 
 from localizer.features import params_from_preset
 from localizer.localizer import Localizer, LocalizerConfig
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Camera, Robot
 from mapdb.database import MapDatabase
 from toploc import bus
 from toploc.bus import BusConfig, open_session
@@ -160,10 +160,12 @@ def start_service(
     policy: str = "separating",
     localizer_config: LocalizerConfig | None = None,
     limits: Limits | None = None,
+    camera: Camera | None = None,
     refresh_settle_s: float = REFRESH_SETTLE_S,
     recalibrate: bool = True,
 ) -> Iterator[Service]:
-    """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``.
+    """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
+    robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
 
     Places and edges added over the bus are used ``refresh_settle_s`` after the last change;
     ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). On exit a running
@@ -184,7 +186,7 @@ def start_service(
             )
         )  # fmt: skip
         if robot is not None:
-            stack.enter_context(RobotNode(session, robot_id, robot, limits))
+            stack.enter_context(RobotNode(session, robot_id, robot, limits, camera))
         remote = RemoteRobot(
             session, robot_id, move_timeout_s=limits.move_timeout_s + bus.DEFAULT_TIMEOUT_S,
             max_image_pixels=limits.max_image_pixels,

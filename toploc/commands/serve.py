@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import signal
 import threading
+from contextlib import ExitStack
 from pathlib import Path
 
 import click
@@ -13,9 +14,11 @@ import click
 from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
+from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
+from robot.camera_sources import CameraError, open_source
 from robot.worlds import WORLD_NAMES, make_world
-from toploc.bus import DEFAULT_ENDPOINT, BusError
+from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
 from toploc.bus_config import bus_config
 from toploc.commands.options import (
     camera_option,
@@ -76,6 +79,18 @@ from toploc.service import start_service
     help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see the README's Limits).",
 )
 @camera_option
+@click.option(
+    "--source",
+    default="sim",
+    show_default=True,
+    help=(
+        "Where camera/capture takes panoramas: sim (the simulated robot's renderer), uvc:N or "
+        "uvc:VIDEO[,layout=dual-fisheye] (a 360° webcam), files:DIR (the next image of a "
+        "folder), ptu:DIR[,step_deg=S,focal_px=F] (a pan sweep stitched), or "
+        "omni:CX,CY,R0,R1[:DEVICE|FILE] (a mirror camera, unwrapped). The base stays the "
+        "simulated robot's."
+    ),
+)
 def serve(
     db_path: Path | None,
     robot_id: str,
@@ -89,6 +104,7 @@ def serve(
     seed: int,
     no_sim: bool,
     camera: str,
+    source: str,
     limits_path: Path | None,
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
@@ -102,6 +118,39 @@ def serve(
         raise click.ClickException(str(error)) from None
     click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
     warn_if_exposed(config)
+    if no_sim and source != "sim":
+        raise click.ClickException(
+            f"--source {source}: the camera is served by this service's robot node, which "
+            "--no-sim leaves out (a camera without a base is not served yet)"
+        )
+    with ExitStack() as stack:
+        capture_from = None
+        if source != "sim":  # opened first: a wrong source fails before a map is made
+            try:
+                capture_from = open_source(source)
+            except CameraError as error:
+                raise click.ClickException(f"--source: {error}") from None
+            stack.callback(getattr(capture_from, "close", lambda: None))
+        _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, camera, limits,
+               source, capture_from)  # fmt: skip
+    click.echo("stopped")
+
+
+def _serve(
+    db_path: Path | None,
+    config: BusConfig,
+    policy: str,
+    sim_world: str,
+    sim_room: str,
+    seed: int,
+    no_sim: bool,
+    camera: str,
+    limits: Limits,
+    source: str,
+    capture_from: Camera | None,
+) -> None:
+    """Run the service until SIGINT or SIGTERM."""
+    robot_id = config.robot_id
     db = db_path or ensure_world_map(sim_world)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -109,14 +158,13 @@ def serve(
     try:
         robot = None if no_sim else kidnapped_robot(make_world(sim_world), sim_room, seed, db)
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
-        with start_service(db, config, robot, policy, localizer_config, limits):
+        with start_service(db, config, robot, policy, localizer_config, limits, capture_from):
             where = f"{sim_world}/{sim_room}" if robot is not None else "the bus's robot node"
             click.echo(
                 f"serving {db} as toploc/{robot_id}/** ({config.mode}, listen "
-                f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}. "
-                "Ctrl-C stops."
+                f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}; "
+                f"camera: {source}. Ctrl-C stops."
             )
             stop.wait()
     except (BusError, MapDatabaseError) as error:  # one line naming the bus or the map
         raise click.ClickException(str(error)) from error
-    click.echo("stopped")

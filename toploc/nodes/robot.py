@@ -1,4 +1,5 @@
-"""The robot on the Zenoh bus: :class:`RobotNode` serves a :class:`~localizer.robot_protocol.Robot`,
+"""The robot on the Zenoh bus: :class:`RobotNode` serves a :class:`~localizer.robot_protocol.Robot`
+(and, if given, a separate :class:`~localizer.robot_protocol.Camera` for its captures),
 :class:`RemoteRobot` is a Robot that talks to such a node.
 
 Keys under ``toploc/<robot_id>/``:
@@ -36,7 +37,7 @@ import numpy as np
 import zenoh
 
 from localizer.panorama_io import MAX_IMAGE_PIXELS, PanoramaError, check_image_header
-from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robot
 from toploc import bus
 from toploc.limits import Limits, RateLimit
 
@@ -121,15 +122,22 @@ def check_command(where: str, command: dict[str, Any], limits: Limits) -> None:
 
 class RobotNode:
     """Serve ``robot`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
-    (or ``with``)."""
+    (or ``with``). ``camera``: where ``camera/capture`` takes its panoramas (a camera that is
+    not the robot's own, e.g. ``robot.camera_sources``); None: ``robot.capture``."""
 
     def __init__(
-        self, session: zenoh.Session, robot_id: str, robot: Robot, limits: Limits | None = None
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        robot: Robot,
+        limits: Limits | None = None,
+        camera: Camera | None = None,
     ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
         bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.robot = robot
+        self.camera: Camera = robot if camera is None else camera
         self.limits = limits or Limits()
         self._lock = threading.Lock()
         self._captures = RateLimit(self.limits.max_captures_per_s)
@@ -173,7 +181,7 @@ class RobotNode:
                 f"rate limited: at most {self.limits.max_captures_per_s} captures per second"
             )
         with self._lock:
-            capture = self.robot.capture()
+            capture = self.camera.capture()
             heading_rad = self.robot.odometry().heading_rad
         meta = {
             "capture_id": next(self._capture_ids),
