@@ -147,16 +147,32 @@ class Localizer:
     """
 
     def __init__(self, loaded: LoadedMap, config: LocalizerConfig | None = None) -> None:
-        self.map = loaded
         self.config = config or LocalizerConfig()
-        self.filter = BeliefFilter(loaded.rooms, loaded.edges, self.config.stay_probability)
         self.latest: Observation | None = None
+        self._use(loaded)
+
+    def _use(self, loaded: LoadedMap) -> None:
+        """Localize against ``loaded`` from now on: its graph, likelihood and evidence params."""
+        self.map = loaded
+        self.filter = BeliefFilter(loaded.rooms, loaded.edges, self.config.stay_probability)
         self._similarity: dict[tuple[int, int], int] = {}
         self.likelihood: Likelihood = (
             self.config.likelihood or loaded.likelihood or RatioLikelihood()
         )
         calibrated = self.likelihood if isinstance(self.likelihood, RatioLikelihood) else None
         self.evidence_params = _resolved(self.config.evidence, calibrated)
+
+    def replace_map(self, loaded: LoadedMap) -> RoomBelief:
+        """Localize against ``loaded`` (the map re-read after places, rooms or edges were added)
+        from now on, keeping the belief: each room both maps know keeps its probability, a new
+        room starts at ``1 / n_rooms`` (then all are normalised). The latest observation stays
+        (its places are still in the map). Returns the belief."""
+        old = self.filter.as_dict()
+        self._use(loaded)
+        share = 1.0 / len(loaded.rooms)
+        prior = {room: old.get(room, share) for room in loaded.rooms}
+        self.filter.reset(prior if sum(prior.values()) > 0 else None)
+        return self.belief()
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read

@@ -75,6 +75,8 @@ LOCALIZER_RESET = "localizer/reset"
 MAP_ROOMS = "map/rooms"
 MAP_PLACES = "map/places"
 MAP_EDGES = "map/edges"
+MAP_ADD = "map/add"
+MAP_CONNECT = "map/connect"
 
 _FORBIDDEN_CHUNK_CHARS = set("/*$?#")
 _log = logging.getLogger(__name__)
@@ -378,6 +380,13 @@ class Reply:
 
 
 Handler = Callable[[bytes | None], Reply]
+BinaryHandler = Callable[[bytes | None, bytes | None], Reply]
+"""A handler of a binary request: ``handler(payload, attachment)`` (e.g. ``map/add``: the PNG
+and its JSON metadata)."""
+
+
+def _bytes(value: zenoh.ZBytes | None) -> bytes | None:
+    return None if value is None else value.to_bytes()
 
 
 def serve(
@@ -392,12 +401,26 @@ def serve(
     thread of its own as soon as it arrives (the handler then orders them itself, e.g. to drop
     those whose querier has given up while they waited).
     """
+    return _declare(session, key_expr, lambda query: handler(_bytes(query.payload)), threaded)
 
+
+def serve_binary(session: zenoh.Session, key_expr: str, handler: BinaryHandler) -> zenoh.Queryable:
+    """:func:`serve` for a request that carries its metadata as an attachment:
+    ``handler(payload, attachment)``."""
+
+    def call(query: zenoh.Query) -> Reply:
+        return handler(_bytes(query.payload), _bytes(query.attachment))
+
+    return _declare(session, key_expr, call, threaded=False)
+
+
+def _declare(
+    session: zenoh.Session, key_expr: str, call: Callable[[zenoh.Query], Reply], threaded: bool
+) -> zenoh.Queryable:
     def answer(query: zenoh.Query) -> None:
         with query:
-            payload = query.payload
             try:
-                reply = handler(None if payload is None else payload.to_bytes())
+                reply = call(query)
             except Exception as error:
                 text = str(error)
                 if not isinstance(error, ValueError):
@@ -441,8 +464,10 @@ def request(
     key_expr: str,
     payload: bytes | None = None,
     timeout_s: float = DEFAULT_TIMEOUT_S,
+    attachment: bytes | None = None,
 ) -> zenoh.Sample:
-    """Query ``key_expr`` and return the first good reply's sample.
+    """Query ``key_expr`` (with ``payload`` and ``attachment``) and return the first good
+    reply's sample.
 
     Raises :class:`BusTimeout` if nobody answers within ``timeout_s`` seconds (no queryable, a
     crashed handler, or too slow), :class:`BusReplyError` with the node's message for an error
@@ -452,7 +477,9 @@ def request(
         raise ValueError(f"timeout_s must be positive, got {timeout_s!r}")
     start_s = time.monotonic()
     try:
-        replies = list(session.get(key_expr, payload=payload, timeout=timeout_s))
+        replies = list(
+            session.get(key_expr, payload=payload, attachment=attachment, timeout=timeout_s)
+        )
     except zenoh.ZError as error:
         raise BusError(f"{key_expr}: query failed: {error}") from error
     waited_s = time.monotonic() - start_s

@@ -9,9 +9,13 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mapdb.build import Extractor
 from mapdb.records import Fingerprint
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def extract_panorama(
@@ -25,13 +29,22 @@ def extract_panorama(
     """
     import cv2
 
-    from localizer.cameras import parse_camera
-    from localizer.features import extract_with_camera
     from localizer.panorama_io import read_panorama
 
     cv2.setNumThreads(1)  # one process per core already
+    return extract_image(read_panorama(path), presets, camera)
+
+
+def extract_image(
+    image: np.ndarray, presets: tuple[str, ...], camera: str = "auto"
+) -> list[Fingerprint]:
+    """One fingerprint per preset of a decoded grey panorama ``image`` (what
+    :func:`extract_panorama` does after reading the file; the map node's ``map/add`` calls it
+    with the image it received)."""
+    from localizer.cameras import parse_camera
+    from localizer.features import extract_with_camera
+
     spec = parse_camera(camera)
-    image = read_panorama(path)
     return [extract_with_camera(image, spec, preset) for preset in presets]
 
 

@@ -32,7 +32,8 @@ class Limits:
     second (a 360° camera's video rate); more get an error reply.
     ``max_pending_localizations``: ``localizer/localize`` queries waiting for their turn beyond
     this are refused at once. ``max_image_pixels``: the
-    largest image (width x height) decoded, checked in its header first.
+    largest image (width x height) decoded, checked in its header first. ``max_image_bytes``:
+    the largest encoded image a client may send (the PNG of ``map/add``).
     """
 
     max_forward_m: float = 5.0
@@ -43,6 +44,7 @@ class Limits:
     max_captures_per_s: int = 30
     max_pending_localizations: int = 8
     max_image_pixels: int = MAX_IMAGE_PIXELS
+    max_image_bytes: int = 64 * 1024 * 1024
 
     def __post_init__(self) -> None:
         for field in fields(self):

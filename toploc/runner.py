@@ -22,7 +22,7 @@ from typing import Any
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
-from localizer.localizer import Localizer
+from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 
 RESET_WAIT_S = 1.0
@@ -172,6 +172,21 @@ class LocalizationRunner:
         if ended:
             self._run_lock.release()
         return ended
+
+    def replace_map(self, loaded: LoadedMap) -> bool:
+        """Swap in ``loaded`` (the map re-read after it grew) between localizations: waits for a
+        running one to end, so the next one uses the new places; publishes the belief. False if
+        the service stopped first."""
+        while not self._run_lock.acquire(timeout=POLL_S):
+            if self._stopping.is_set():
+                return False
+        try:
+            if self._stopping.is_set():
+                return False
+            self._set(self.localizer.replace_map(loaded))
+        finally:
+            self._run_lock.release()
+        return True
 
     def reset(self, prior: Mapping[str, float] | None) -> dict[str, Any]:
         """Uniform belief, or ``prior``; ``RuntimeError`` while a localization is running."""

@@ -4,10 +4,19 @@
 when a robot object is given (the simulated robot here), its robot node. The localizer always
 drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base
 running its own robot node elsewhere is used the same way.
+
+A map that grows over the bus (``map/add``, ``map/connect``) is picked up without a restart by
+:class:`MapRefresher`: once no change came for ``settle_s`` seconds it re-reads the map and swaps
+it into the localizer between two localizations (the next one uses the new places), then, if
+asked, re-calibrates the likelihood on the grown map (about 20 s per detector here) and swaps
+the map in again with it.
 """
 
 from __future__ import annotations
 
+import logging
+import threading
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -15,26 +24,132 @@ from pathlib import Path
 
 import zenoh
 
+from localizer.features import params_from_preset
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Camera, Robot
+from mapdb.database import MapDatabase
 from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
-from toploc.maps import load_map
+from toploc.maps import calibrate_map, load_map
 from toploc.nodes.localizer import LocalizerNode
 from toploc.nodes.mapdb import MapNode
 from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.runner import LocalizationRunner
 
+REFRESH_SETTLE_S = 2.0
+_log = logging.getLogger(__name__)
+
+
+class MapRefresher:
+    """Reload the map at ``db_path`` into ``runner`` after changes settle (a thread of its own).
+
+    :meth:`changed` (the map node calls it after each write) restarts the ``settle_s`` wait; when
+    it ends the map is re-read (``detector``) and swapped in (:meth:`LocalizationRunner.
+    replace_map`); with ``recalibrate``, each detector the map holds (``detector`` first) is
+    then calibrated and the map swapped in again with its new likelihood. A change during the
+    calibration starts another round when it ends. Errors are logged; the old map stays.
+    """
+
+    def __init__(
+        self,
+        db_path: Path,
+        runner: LocalizationRunner,
+        detector: str = "sift",
+        settle_s: float = REFRESH_SETTLE_S,
+        recalibrate: bool = True,
+    ) -> None:
+        self.db_path = db_path
+        self.runner = runner
+        self.detector = detector
+        self.settle_s = settle_s
+        self.recalibrate = recalibrate
+        self._lock = threading.Lock()
+        self._changes = 0
+        self._done = 0
+        self._last_change_s = 0.0
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._idle = threading.Condition(self._lock)
+        self._thread = threading.Thread(target=self._run, name="map-refresh", daemon=True)
+        self._thread.start()
+
+    def changed(self) -> None:
+        """The map was written: refresh once no change came for ``settle_s``."""
+        with self._lock:
+            self._changes += 1
+            self._last_change_s = time.monotonic()
+        self._wake.set()
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until every change so far is refreshed (and calibrated if asked); whether it
+        was within ``timeout_s``."""
+        with self._idle:
+            return self._idle.wait_for(lambda: self._done >= self._changes, timeout_s)
+
+    def close(self, wait_s: float = 1.0) -> None:
+        """Stop the thread (a calibration in progress finishes on its own, in the background)."""
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(wait_s)
+
+    def _settled(self) -> int | None:
+        """Wait for ``settle_s`` without a change; the number of changes then (None: stop)."""
+        while True:
+            with self._lock:
+                remaining_s = self._last_change_s + self.settle_s - time.monotonic()
+                changes = self._changes
+            if remaining_s <= 0:
+                return changes
+            if self._stop.wait(remaining_s):
+                return None
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait()
+            self._wake.clear()
+            with self._lock:
+                if self._done >= self._changes:  # woken by changes the last round included
+                    continue
+            changes = self._settled()
+            if changes is None:
+                return
+            try:
+                self._refresh()
+            except Exception as error:  # the service goes on with the map it has
+                _log.warning("map refresh of %s failed: %s", self.db_path, error)
+            with self._idle:
+                self._done = max(self._done, changes)
+                self._idle.notify_all()
+
+    def _refresh(self) -> None:
+        detector = params_from_preset(self.detector).detector
+        if not self.runner.replace_map(load_map(self.db_path, self.detector)):
+            return
+        _log.info("map %s reloaded", self.db_path)
+        if not self.recalibrate:
+            return
+        with MapDatabase.open(self.db_path, create=False, readonly=True) as map_db:
+            held = sorted(map_db.fingerprint_counts(), key=lambda d: d != detector)
+        for name in held:
+            if self._stop.is_set():
+                return
+            calibrate_map(self.db_path, name)
+            _log.info("map %s: %s likelihood re-calibrated", self.db_path, name)
+            if name == detector:
+                self.runner.replace_map(load_map(self.db_path, self.detector))
+
 
 @dataclass(frozen=True)
 class Service:
-    """A running service: its session, the runner behind ``localizer/*`` and the map."""
+    """A running service: its session, the runner behind ``localizer/*``, the map (as first
+    loaded) and what keeps it fresh."""
 
     session: zenoh.Session
     config: BusConfig
     runner: LocalizationRunner
     localizer: Localizer
+    refresher: MapRefresher
 
 
 @contextmanager
@@ -46,12 +161,16 @@ def start_service(
     localizer_config: LocalizerConfig | None = None,
     limits: Limits | None = None,
     camera: Camera | None = None,
+    refresh_settle_s: float = REFRESH_SETTLE_S,
+    recalibrate: bool = True,
 ) -> Iterator[Service]:
     """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
     robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
 
-    On exit a running localization is ended (at its next capture or move), then everything is
-    undeclared and the session closed (an unclosed session keeps the process alive).
+    Places and edges added over the bus are used ``refresh_settle_s`` after the last change;
+    ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). On exit a running
+    localization is ended (at its next capture or move), then everything is undeclared and the
+    session closed (an unclosed session keeps the process alive).
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
@@ -60,7 +179,12 @@ def start_service(
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
-        stack.enter_context(MapNode(session, robot_id, db_path))
+        map_node = stack.enter_context(
+            MapNode(
+                session, robot_id, db_path, limits, str(localizer_config.camera),
+                detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
+            )
+        )  # fmt: skip
         if robot is not None:
             stack.enter_context(RobotNode(session, robot_id, robot, limits, camera))
         remote = RemoteRobot(
@@ -74,4 +198,9 @@ def start_service(
         node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
         runner.publish = node.publish
         stack.callback(runner.stop)
-        yield Service(session, config, runner, localizer)
+        refresher = MapRefresher(
+            db_path, runner, localizer_config.detector, refresh_settle_s, recalibrate
+        )
+        stack.callback(refresher.close)
+        map_node.on_change = refresher.changed
+        yield Service(session, config, runner, localizer, refresher)

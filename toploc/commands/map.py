@@ -38,6 +38,7 @@ from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import MapInfo, check_name
 from toploc.commands.options import camera_option
+from toploc.commands.record import record_command
 from toploc.extraction import resolve_extractor
 
 DEFAULT_DETECTORS = "sift,mser"
@@ -375,6 +376,8 @@ def export_command(db_path: Path, graphml_path: Path) -> None:
         f"wrote {graphml_path}: {graph.number_of_nodes()} rooms, {graph.number_of_edges()} edges"
     )
 
+
+map_group.add_command(record_command)
 
 if __name__ == "__main__":
     map_group()

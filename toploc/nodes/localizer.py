@@ -16,6 +16,14 @@ Keys under ``toploc/<robot_id>/``:
 The belief is the one JSON form of :meth:`localizer.belief.RoomBelief.to_json` (``kind:
 "belief"``); every belief sent or received is checked by :meth:`RoomBelief.from_json`.
 
+A robot gone: the node follows the robot node's liveliness token (``alive/robot``). Once it has
+seen the robot and the token goes (the robot node stopped, crashed or lost its link), every
+belief it answers or publishes carries ``"stale": true`` and ``"age_s"`` (seconds since the
+belief's ``stamp``; the last belief is still served, nothing updates it), and the stale belief
+is published at once; when the token comes back a fresh (unmarked) belief is published. Both
+fields are optional: :func:`check_belief` keeps them, and a reader that does not know them
+(``RoomBelief.from_json``) ignores them.
+
 Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
 indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
 ``reset`` queries; each ``localize`` query gets a thread of its own as it arrives, and the
@@ -41,6 +49,8 @@ from toploc.limits import Limits
 NODE_NAME = "localizer"
 _log = logging.getLogger(__name__)
 LOCALIZE_TIMEOUT_S = 300.0
+ROBOT_NODE = "robot"
+STALE_FIELDS: dict[str, bus.FieldType] = {"stale": bool, "age_s": (float, type(None))}
 
 
 class LocalizationService(Protocol):
@@ -62,11 +72,26 @@ class LocalizationService(Protocol):
 
 def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
     """The belief message (``RoomBelief.to_json()``) ``belief`` stands for, checked field by
-    field; :class:`~toploc.bus.BusMessageError` prefixed ``where`` naming the bad field."""
+    field, with the optional ``stale`` (bool) and ``age_s`` (a number >= 0, or null) kept;
+    :class:`~toploc.bus.BusMessageError` prefixed ``where`` naming the bad field."""
     try:
-        return RoomBelief.from_json(belief).to_json()
+        checked = RoomBelief.from_json(belief).to_json()
     except ValueError as error:
         raise bus.BusMessageError(f"{where}: {error}") from None
+    optional = {k: t for k, t in STALE_FIELDS.items() if k in belief}
+    bus.check_fields(where, belief, optional)
+    if belief.get("age_s") is not None and belief["age_s"] < 0:
+        raise bus.BusMessageError(f"{where}: field 'age_s' must be >= 0, got {belief['age_s']!r}")
+    return {**checked, **{k: belief[k] for k in optional}}
+
+
+def mark_stale(belief: Mapping[str, Any], now_s: float | None = None) -> dict[str, Any]:
+    """``belief`` with ``"stale": true`` and ``"age_s"``: seconds since its ``stamp`` (``now_s``,
+    default ``time.time()``), null without a stamp."""
+    stamp = belief.get("stamp")
+    now = time.time() if now_s is None else now_s
+    age_s = None if stamp is None else max(0.0, now - stamp)
+    return {**belief, "stale": True, "age_s": age_s}
 
 
 def check_prior(where: str, prior: Any) -> dict[str, float] | None:
@@ -101,8 +126,16 @@ class LocalizerNode:
         self.limits = limits or Limits()
         self._publish_lock = threading.Lock()
         self._last_published: dict[str, Any] | None = None
+        self._robot_lock = threading.Lock()
+        self._robot_seen = False
+        self._robot_gone = False
         self._publisher = session.declare_publisher(self.key(bus.LOCALIZER_BELIEF))
         self._entities: list[Any] = [
+            session.liveliness().declare_subscriber(
+                bus.alive_key(robot_id, ROBOT_NODE),
+                zenoh.handlers.Callback(self._on_robot_token),
+                history=True,
+            ),
             bus.serve(session, self.key(bus.LOCALIZER_BELIEF), self._on_belief),
             bus.serve(session, self.key(bus.LOCALIZER_LOCALIZE), self._on_localize, threaded=True),
             bus.serve(session, self.key(bus.LOCALIZER_RESET), self._on_reset),
@@ -124,14 +157,39 @@ class LocalizerNode:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
+    @property
+    def robot_gone(self) -> bool:
+        """Whether the robot node's token went after it was seen (the belief is stale)."""
+        with self._robot_lock:
+            return self._robot_gone
+
+    def _on_robot_token(self, sample: zenoh.Sample) -> None:
+        """The robot node's liveliness token came (PUT) or went (DELETE)."""
+        gone = sample.kind == zenoh.SampleKind.DELETE
+        with self._robot_lock:
+            self._robot_seen = self._robot_seen or not gone
+            was_gone, self._robot_gone = self._robot_gone, gone and self._robot_seen
+            changed = was_gone != self._robot_gone
+        if not changed:
+            return
+        _log.warning("robot node %s", "gone: the belief is stale" if gone else "back")
+        try:
+            self.publish(self.service.belief())
+        except (bus.BusError, zenoh.ZError) as error:
+            _log.warning("could not publish the belief: %s", error)
+
+    def _marked(self, belief: Mapping[str, Any]) -> dict[str, Any]:
+        return mark_stale(belief) if self.robot_gone else dict(belief)
+
     def publish(self, belief: Mapping[str, Any]) -> bool:
         """Publish ``belief`` on ``localizer/belief`` unless it equals the last one published.
 
         The service calls this whenever its belief changes (e.g. during active localization);
-        the node also calls it with the result of ``localize`` and ``reset``. Returns whether it
-        was published. Raises BusMessageError for a belief that breaks the contract.
+        the node also calls it with the result of ``localize`` and ``reset``, and when the robot
+        node goes or comes back. Marked stale while the robot is gone. Returns whether it was
+        published. Raises BusMessageError for a belief that breaks the contract.
         """
-        checked = check_belief(f"{self.key(bus.LOCALIZER_BELIEF)} (publish)", belief)
+        checked = check_belief(f"{self.key(bus.LOCALIZER_BELIEF)} (publish)", self._marked(belief))
         with self._publish_lock:
             if checked == self._last_published:
                 return False
@@ -144,7 +202,7 @@ class LocalizerNode:
         checked = check_belief(where, belief)
         if publish:
             self.publish(checked)
-        return bus.Reply(bus.encode_message(checked))
+        return bus.Reply(bus.encode_message(check_belief(where, self._marked(checked))))
 
     def _on_belief(self, _payload: bytes | None) -> bus.Reply:
         return self._belief_reply(self.service.belief(), publish=False)

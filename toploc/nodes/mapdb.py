@@ -1,29 +1,61 @@
-"""The map on the Zenoh bus: :class:`MapNode` answers ``map/rooms``, ``map/places`` and
-``map/edges`` under ``toploc/<robot_id>/`` from a map database file.
+"""The map on the Zenoh bus: :class:`MapNode` answers ``map/rooms``, ``map/places``,
+``map/edges``, ``map/add`` and ``map/connect`` under ``toploc/<robot_id>/`` from a map database
+file; :class:`MapClient` is what a client uses to talk to it.
 
 - ``map/rooms`` -> ``{"rooms": [{"id", "name", "n_places"}]}``
 - ``map/places`` (optional ``{"room": name}``) -> ``{"places": [Place fields]}``; positions in
   metres and headings in degrees in the frame of the place's room.
 - ``map/edges`` -> ``{"edges": [[room_a, room_b]]}`` (the undirected room graph)
+- ``map/add``: payload the panorama as PNG bytes, attachment ``{"kind": "add", "room",
+  "x_m"?, "y_m"?, "heading_deg"?}`` -> ``{"place_id", "room", "new", "fingerprints":
+  {detector: n}, "refresh_after_s"}``. The image is checked (at most ``max_image_bytes``, a PNG
+  of at most ``max_image_pixels`` by its header) before it is decoded; each detector the map
+  holds is extracted (:func:`toploc.extraction.extract_image`, the path of ``toploc map add``)
+  and the place written with its fingerprints in one transaction. The same image again is
+  answered with its place (``new`` false).
+- ``map/connect``: ``{"kind": "connect", "room_a", "room_b"}`` -> ``{"room_a", "room_b",
+  "added"}``; both rooms must exist.
 
-Each query opens the file read-only for its own duration: zenoh runs each queryable on a thread
-of its own and an ``sqlite3`` connection may only be used by the thread that made it; a map
-rebuilt while the node runs is thus served fresh. A map error becomes an error reply.
+Each read opens the file read-only for its own duration, each write writable: zenoh runs each
+queryable on a thread of its own and an ``sqlite3`` connection may only be used by the thread
+that made it; a map rebuilt while the node runs is thus served fresh. A map error (a read-only
+map, a lock) becomes an error reply and nothing is written. After a write the node calls
+``on_change`` (the service reloads the localizer's map, see :mod:`toploc.service`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import zenoh
 
+from localizer.panorama_io import decode_grey
 from mapdb.database import MapDatabase
+from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
+from mapdb.records import NewPlace, check_name
 from toploc import bus
+from toploc.limits import Limits
 
 NODE_NAME = "mapdb"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+ADD_TIMEOUT_S = 60.0
+"""How long :meth:`MapClient.add` waits: sending a large PNG and extracting its features."""
+POSE_FIELDS: dict[str, bus.FieldType] = {
+    "x_m": (float, type(None)),
+    "y_m": (float, type(None)),
+    "heading_deg": (float, type(None)),
+}
+ADDED_FIELDS: dict[str, bus.FieldType] = {
+    "place_id": int,
+    "room": str,
+    "new": bool,
+    "fingerprints": dict,
+}
 
 
 def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
@@ -35,19 +67,46 @@ def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-class MapNode:
-    """Serve the map at ``db_path`` on the bus; ``close()`` (or ``with``) to stop."""
+def _named(where: str, field: str, error: ValueError) -> bus.BusMessageError:
+    return bus.BusMessageError(f"{where}: field {field!r}: {error}")
 
-    def __init__(self, session: zenoh.Session, robot_id: str, db_path: Path | str) -> None:
+
+class MapNode:
+    """Serve the map at ``db_path`` on the bus within ``limits``; ``close()`` (or ``with``).
+
+    ``camera``: the ``--camera`` text the panoramas of ``map/add`` are read with.
+    ``detectors``: what ``map/add`` extracts when the map holds no fingerprint yet (otherwise
+    each detector the map holds). ``on_change``: called after each write.
+    ``refresh_after_s``: told in the ``map/add`` reply (when the localizer uses the place).
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        db_path: Path | str,
+        limits: Limits | None = None,
+        camera: str = "auto",
+        detectors: tuple[str, ...] = ("sift",),
+        on_change: Callable[[], None] | None = None,
+        refresh_after_s: float | None = None,
+    ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
         bus.ensure_unique_node(session, robot_id, NODE_NAME)
         self.db_path = Path(db_path)
+        self.limits = limits or Limits()
+        self.camera = camera
+        self.detectors = detectors
+        self.on_change = on_change
+        self.refresh_after_s = refresh_after_s
         k = self.key
         self._entities: list[Any] = [
             bus.serve(session, k(bus.MAP_ROOMS), self._on_rooms),
             bus.serve(session, k(bus.MAP_PLACES), self._on_places),
             bus.serve(session, k(bus.MAP_EDGES), self._on_edges),
+            bus.serve_binary(session, k(bus.MAP_ADD), self._on_add),
+            bus.serve(session, k(bus.MAP_CONNECT), self._on_connect),
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
 
@@ -88,3 +147,177 @@ class MapNode:
         with self._open() as map_db:
             edges = [list(edge) for edge in map_db.edges()]
         return bus.Reply(bus.encode("edges", {"edges": edges}))
+
+    def _open_writable(self, where: str) -> MapDatabase:
+        try:
+            return MapDatabase.open(self.db_path, create=False)
+        except MapDatabaseError as error:
+            raise bus.BusMessageError(
+                f"{where}: the map cannot be written, nothing was added ({error})"
+            ) from None
+
+    def _changed(self) -> None:
+        if self.on_change is not None:
+            self.on_change()
+
+    def _decode_metadata(self, where: str, attachment: bytes | None) -> dict[str, Any]:
+        """The checked metadata of a ``map/add`` request (the attachment)."""
+        limits = self.limits
+        meta = bus.decode(
+            f"{where} (attachment)",
+            attachment,
+            {"room": str},
+            "add",
+            limits.max_request_bytes,
+            limits.max_string_chars,
+        )
+        bus.check_fields(where, meta, {k: t for k, t in POSE_FIELDS.items() if k in meta})
+        try:
+            check_name(meta["room"])
+        except ValueError as error:
+            raise _named(where, "room", error) from None
+        if (meta.get("x_m") is None) != (meta.get("y_m") is None):
+            raise bus.BusMessageError(f"{where}: give both 'x_m' and 'y_m', or neither")
+        return meta
+
+    def _check_image(self, where: str, payload: bytes | None) -> bytes:
+        """The PNG bytes of a ``map/add`` request, within the limits (not decoded yet)."""
+        if not payload:
+            raise bus.BusMessageError(f"{where}: empty payload, expected a PNG panorama")
+        if len(payload) > self.limits.max_image_bytes:
+            raise bus.BusMessageError(
+                f"{where}: the image is {len(payload)} bytes; at most "
+                f"{self.limits.max_image_bytes} are accepted (max_image_bytes)"
+            )
+        if not payload.startswith(PNG_SIGNATURE):
+            raise bus.BusMessageError(
+                f"{where}: the payload is not a PNG image ({len(payload)} bytes, starts "
+                f"{payload[:8]!r})"
+            )
+        return payload
+
+    def _on_add(self, payload: bytes | None, attachment: bytes | None) -> bus.Reply:
+        from toploc.extraction import extract_image
+
+        where = self.key(bus.MAP_ADD)
+        meta = self._decode_metadata(where, attachment)
+        data = self._check_image(where, payload)
+        image = decode_grey(data, where, self.limits.max_image_pixels)
+        sha = hashlib.sha256(data).hexdigest()
+        place = NewPlace(
+            room=meta["room"],
+            image_sha256=sha,
+            source=f"{where} sha256:{sha[:12]}",
+            x_m=meta.get("x_m"),
+            y_m=meta.get("y_m"),
+            heading_deg=meta.get("heading_deg"),
+            captured_utc=None,
+        )
+        with self._open_writable(where) as map_db:
+            presets = tuple(map_db.fingerprint_counts()) or self.detectors
+            fingerprints = extract_image(image, presets, self.camera)
+            try:
+                place_id, new = map_db.add_place(place, fingerprints), True
+            except DuplicatePlaceError as error:
+                place_id, new = error.place_id, False
+        if new:
+            self._changed()
+        reply = {
+            "place_id": place_id,
+            "room": place.room,
+            "new": new,
+            "fingerprints": {f.detector: f.n for f in fingerprints},
+            "refresh_after_s": self.refresh_after_s,
+        }
+        return bus.Reply(bus.encode("added", reply))
+
+    def _on_connect(self, payload: bytes | None) -> bus.Reply:
+        where = self.key(bus.MAP_CONNECT)
+        limits = self.limits
+        request = bus.decode(
+            where,
+            payload,
+            {"room_a": str, "room_b": str},
+            "connect",
+            limits.max_request_bytes,
+            limits.max_string_chars,
+        )
+        for field in ("room_a", "room_b"):
+            try:
+                check_name(request[field])
+            except ValueError as error:
+                raise _named(where, field, error) from None
+        if request["room_a"] == request["room_b"]:
+            raise bus.BusMessageError(
+                f"{where}: cannot connect room {request['room_a']!r} to itself"
+            )
+        with self._open_writable(where) as map_db:
+            try:
+                added = map_db.connect_rooms(request["room_a"], request["room_b"])
+            except UnknownRoomError as error:
+                field = "room_a" if error.room == request["room_a"] else "room_b"
+                raise bus.BusMessageError(
+                    f"{where}: field {field!r}: unknown room {error.room!r} (add a place in it "
+                    "first)"
+                ) from None
+        if added:
+            self._changed()
+        reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
+        return bus.Reply(bus.encode("connected", reply))
+
+
+class MapClient:
+    """Query and extend the map of robot ``robot_id`` over ``session``.
+
+    Every call raises :class:`~toploc.bus.BusTimeout` if no map node answers in time,
+    :class:`~toploc.bus.BusReplyError` with the node's message for an error reply.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        timeout_s: float = bus.DEFAULT_TIMEOUT_S,
+        add_timeout_s: float = ADD_TIMEOUT_S,
+    ) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        self.timeout_s = timeout_s
+        self.add_timeout_s = add_timeout_s
+
+    def key(self, suffix: str) -> str:
+        """``toploc/<robot_id>/<suffix>``."""
+        return bus.key(self.robot_id, suffix)
+
+    def add(
+        self,
+        png: bytes,
+        room: str,
+        x_m: float | None = None,
+        y_m: float | None = None,
+        heading_deg: float | None = None,
+    ) -> dict[str, Any]:
+        """Add the panorama ``png`` as a place of ``room`` (pose optional, in the room's frame,
+        or another frame the caller documents); the reply (``place_id``, ``new``, ...)."""
+        meta: dict[str, Any] = {"room": room}
+        for name, value in (("x_m", x_m), ("y_m", y_m), ("heading_deg", heading_deg)):
+            if value is not None:
+                meta[name] = value
+        key_expr = self.key(bus.MAP_ADD)
+        sample = bus.request(
+            self.session, key_expr, png, self.add_timeout_s, attachment=bus.encode("add", meta)
+        )
+        return bus.decode(key_expr, sample.payload.to_bytes(), ADDED_FIELDS)
+
+    def connect(self, room_a: str, room_b: str) -> dict[str, Any]:
+        """Add the room-graph edge ``room_a`` -- ``room_b``; the reply (``added``)."""
+        payload = bus.encode("connect", {"room_a": room_a, "room_b": room_b})
+        key_expr = self.key(bus.MAP_CONNECT)
+        return bus.request_json(self.session, key_expr, {"added": bool}, payload, self.timeout_s)
+
+    def places(self, room: str | None = None) -> list[dict[str, Any]]:
+        """The map's places (of ``room`` if given)."""
+        payload = None if room is None else bus.encode("places", {"room": room})
+        key_expr = self.key(bus.MAP_PLACES)
+        reply = bus.request_json(self.session, key_expr, {"places": list}, payload, self.timeout_s)
+        return list(reply["places"])
