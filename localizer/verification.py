@@ -35,6 +35,7 @@ query ray (distant points, small parallax), or the two rays triangulate in front
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -267,6 +268,28 @@ def verify(
         rotation=R,
         translation_dir=t,
     )
+
+
+FLOOR_ELEVATION_DEG = -25.0
+"""Homing leaves out matches below this elevation in either panorama (:func:`above_floor`): with
+the camera 1.4 m up, the floor within 3 m. Floors repeat (planks, tiles) and barely move between
+nearby places, so their matches, often aliased, can outvote the walls in the cheirality test
+that sets the sign of the translation (README, "Homing on images")."""
+
+
+def above_floor(
+    rays_query: np.ndarray,
+    rays_place: np.ndarray,
+    matches: np.ndarray,
+    min_elevation_deg: float = FLOOR_ELEVATION_DEG,
+) -> np.ndarray:
+    """The rows of ``matches`` (``[query_row, place_row]``) whose rays both lie above
+    ``min_elevation_deg`` (degrees, positive up)."""
+    if len(matches) == 0:
+        return matches
+    z_min = math.sin(math.radians(min_elevation_deg))
+    keep = (rays_query[matches[:, 0], 2] > z_min) & (rays_place[matches[:, 1], 2] > z_min)
+    return matches[keep]
 
 
 def home_direction_rad(verification: Verification, min_inliers: int = 1) -> float:

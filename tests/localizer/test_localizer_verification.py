@@ -207,3 +207,15 @@ def test_rays_from_fingerprint_geometry() -> None:
     with pytest.raises(ValueError, match="cylinder is 100x41"):
         rays_from_fingerprint(fp, Cylinder(100, 41))
     np.testing.assert_allclose(rays_from_angles([np.pi / 2], [0.0]), [[0.0, 1.0, 0.0]], atol=1e-12)
+
+
+def test_above_floor_keeps_the_matches_whose_rays_both_clear_the_floor_band():
+    from localizer.rays import rays_from_angles
+    from localizer.verification import above_floor
+
+    elevations_deg = np.array([-40.0, -20.0, 0.0, 30.0])
+    rays = rays_from_angles(np.zeros(4), np.radians(elevations_deg))
+    matches = np.array([[0, 3], [1, 2], [2, 0], [3, 3]])
+    kept = above_floor(rays, rays, matches, min_elevation_deg=-25.0)
+    np.testing.assert_array_equal(kept, [[1, 2], [3, 3]])
+    assert above_floor(rays, rays, matches[:0]).shape == (0, 2)

@@ -21,7 +21,10 @@ manifest (section 5.6). The others work without headings:
   ``"matched-alv"``. The essential matrix fixes the axis of motion well, but its sign comes
   from which side of both cameras the matched points triangulate on, and a floor texture that
   repeats about once per place spacing (the rendered house) puts most matches on the wrong
-  side: the raw translation then points away from home (see the README).
+  side: the raw translation then points away from home (see the README);
+* ``"pose-above-floor"``: ``"pose"`` from the matches above
+  :data:`localizer.verification.FLOOR_ELEVATION_DEG` in both panoramas (the floor within 3 m
+  left out), falling back to ``"matched-alv"`` (of all matches) without geometry.
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
@@ -67,7 +70,7 @@ from localizer.features import extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from localizer.rays import rays_from_fingerprint
-from localizer.verification import Verification, home_direction_rad, verify
+from localizer.verification import Verification, above_floor, home_direction_rad, verify
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import spawn_process_pool
@@ -80,8 +83,9 @@ METHODS: tuple[str, ...] = (
     "matched-vote",
     "pose",
     "pose-alv",
+    "pose-above-floor",
 )
-BEST_METHOD = "pose-alv"
+BEST_METHOD = "pose-above-floor"
 POSE_MIN_INLIERS = 40
 """``pose-alv`` trusts a verified pose with at least this many inliers (measured on the photo
 rooms, house, lab, square and corridor: README, "Homing on images")."""
@@ -198,7 +202,7 @@ class PairCache:
         self.fingerprints = tuple(fingerprints)
         self.progress = progress
         self._matches: dict[tuple[int, int], np.ndarray] = {}
-        self._verifications: dict[tuple[int, int], Verification] = {}
+        self._verifications: dict[tuple[int, int, bool], Verification] = {}
 
     def holds(self, fingerprints: Sequence[Fingerprint]) -> bool:
         """Whether this cache is of exactly these fingerprint objects, in this order."""
@@ -206,16 +210,17 @@ class PairCache:
             a is b for a, b in zip(fingerprints, self.fingerprints, strict=True)
         )
 
-    def prepare(self, pairs: np.ndarray, verified: bool = False) -> None:
-        """Compute the matches (and, if ``verified``, the poses) of all of ``pairs`` at once."""
+    def prepare(self, pairs: np.ndarray, verified: bool = False, floor: bool = True) -> None:
+        """Compute the matches (and, if ``verified``, the poses: with the floor's matches, or
+        without them) of all of ``pairs`` at once."""
         keys = sorted({(min(a, b), max(a, b)) for a, b in pairs.tolist()})
         todo = [k for k in keys if k not in self._matches]
         for i, j in tqdm(todo, desc="match", disable=not self.progress):
             self.matches(i, j)
         if verified:
-            todo = [k for k in keys if k not in self._verifications]
+            todo = [k for k in keys if (*k, floor) not in self._verifications]
             for i, j in tqdm(todo, desc="verify", disable=not self.progress):
-                self.verification(i, j)
+                self.verification(i, j, floor)
 
     def matches(self, a: int, b: int) -> np.ndarray:
         """Matches ``(k, 2)`` ``[row in a, row in b]`` (Lowe's ratio, cross-checked)."""
@@ -226,14 +231,18 @@ class PairCache:
         m = self._matches[(i, j)]
         return m if a <= b else m[:, ::-1]
 
-    def verification(self, a: int, b: int) -> Verification:
-        """The relative pose of ``a`` (query) and ``b`` (place) from their matched rays."""
+    def verification(self, a: int, b: int, floor: bool = True) -> Verification:
+        """The relative pose of ``a`` (query) and ``b`` (place) from their matched rays; without
+        ``floor``, from those above :data:`localizer.verification.FLOOR_ELEVATION_DEG`."""
         i, j = min(a, b), max(a, b)
-        if (i, j) not in self._verifications:
+        if (i, j, floor) not in self._verifications:
             fps = self.fingerprints
             rays_i, rays_j = rays_from_fingerprint(fps[i]), rays_from_fingerprint(fps[j])
-            self._verifications[(i, j)] = verify(rays_i, rays_j, self.matches(i, j))
-        v = self._verifications[(i, j)]
+            matches = self.matches(i, j)
+            if not floor:
+                matches = above_floor(rays_i, rays_j, matches)
+            self._verifications[(i, j, floor)] = verify(rays_i, rays_j, matches)
+        v = self._verifications[(i, j, floor)]
         return v if a <= b else v.swapped()
 
 
@@ -306,9 +315,12 @@ def _home_directions(
     if method == "alv-compass":
         return _compass_directions(bearings, pairs)
     out = np.full(len(pairs), np.nan)
-    if method == "pose":
-        cache.prepare(pairs, verified=True)
-        out = np.array([home_direction_rad(cache.verification(i, j)) for i, j in pairs.tolist()])
+    if method in ("pose", "pose-above-floor"):
+        floor = method == "pose"
+        cache.prepare(pairs, verified=True, floor=floor)
+        out = np.array(
+            [home_direction_rad(cache.verification(i, j, floor)) for i, j in pairs.tolist()]
+        )
         fallback = np.isnan(out)  # no geometry: the matched ALV
         if np.any(fallback):
             out[fallback] = _home_directions("matched-alv", places, cache, pairs[fallback])
