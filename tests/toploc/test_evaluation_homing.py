@@ -58,7 +58,9 @@ def test_same_room_pairs_never_cross_rooms() -> None:
 
 
 @pytest.mark.parametrize("detector", ["sift", "mser"])
-@pytest.mark.parametrize("method", ["thesis", "best", "alv-compass", "matched-vote"])
+@pytest.mark.parametrize(
+    "method", ["thesis", "best", "alv-compass", "matched-vote", "pose-above-floor"]
+)
 def test_every_ordered_pair_is_evaluated(dataset, fingerprints, detector, method) -> None:
     places = load_places(dataset)
     run = evaluate_homing(places, fingerprints[detector], method)
@@ -294,13 +296,13 @@ def test_pose_alv_signs_the_axis_by_the_matched_alv() -> None:
     np.testing.assert_allclose(_signed_axis(axis, reference), [0.2, 0.2 - np.pi, -0.1, 1.0])
 
 
-def test_the_pose_above_the_floor_is_best_and_homes(dataset, fingerprints) -> None:
+def test_pose_alv_is_best_and_homes(dataset, fingerprints) -> None:
     from toploc.evaluation.homing import BEST_METHOD
 
-    assert BEST_METHOD == "pose-above-floor"
+    assert BEST_METHOD == "pose-alv"
     places = load_places(dataset)
     run = evaluate_homing(places, fingerprints["sift"], "best")
-    above = evaluate_homing(places, fingerprints["sift"], "pose-above-floor")
-    np.testing.assert_allclose(run.errors_deg, above.errors_deg)
+    pose_alv = evaluate_homing(places, fingerprints["sift"], "pose-alv")
+    np.testing.assert_allclose(run.errors_deg, pose_alv.errors_deg)
     assert run.stats.n_failed == 0
     assert run.stats.mean_deg < 60.0 and run.stats.under_90 > 0.8  # chance: 90 deg, 50 %

@@ -85,7 +85,7 @@ METHODS: tuple[str, ...] = (
     "pose-alv",
     "pose-above-floor",
 )
-BEST_METHOD = "pose-above-floor"
+BEST_METHOD = "pose-alv"
 POSE_MIN_INLIERS = 40
 """``pose-alv`` trusts a verified pose with at least this many inliers (measured on the photo
 rooms, house, lab, square and corridor: README, "Homing on images")."""
