@@ -140,7 +140,7 @@ def _vertical_hits(
     axis = scene.axis[quads]
     d_axis = dirs[:, axis]  # (W, K) direction component normal to each plane
     d_along = dirs[:, 1 - axis]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # masked below
         t = (scene.coord_m[quads] - origin[axis]) / d_axis
     along = origin[1 - axis] + t * d_along
     ok = (d_axis * scene.normal_sign[quads] < 0) & (t > 1e-9)
