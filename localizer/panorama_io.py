@@ -55,6 +55,10 @@ class PanoramaError(ValueError):
     """A panorama could not be read or unwrapped; the message names the file and the reason."""
 
 
+class ImageTooLargeError(PanoramaError):
+    """An image's header says it has more pixels than accepted."""
+
+
 def _sniff_format(head: bytes) -> str | None:
     """Image format named by the file's leading magic bytes, or None if unrecognised."""
     if head[:4] == b"RIFF" and head[8:12] == b"WEBP":
@@ -118,14 +122,23 @@ def header_size_px(data: bytes) -> tuple[int, int] | None:
 
 def check_image_header(data: bytes, source: str, max_pixels: int = MAX_IMAGE_PIXELS) -> None:
     """Raise PanoramaError naming ``source`` if the header of ``data`` says the image has more
-    than ``max_pixels`` pixels (width x height), before anything decodes it."""
+    than ``max_pixels`` pixels (width x height), or its size cannot be read from the header,
+    before anything decodes it."""
     limit = f"at most {max_pixels} pixels are accepted (shrink it first)"
     try:
         size = header_size_px(data)
     except Image.DecompressionBombError as error:
-        raise PanoramaError(f"{source}: {error.args[0].split(',')[0]}; {limit}") from None
-    if size is not None and size[0] * size[1] > max_pixels:
-        raise PanoramaError(f"{source}: image is {size[0]}x{size[1]} px; {limit}")
+        raise ImageTooLargeError(f"{source}: {error.args[0].split(',')[0]}; {limit}") from None
+    if size is None:  # OpenCV would decode it unbounded (e.g. Radiance .hdr, .pfm): refused
+        fmt = _sniff_format(data[:16])
+        if fmt is None:
+            raise PanoramaError(
+                f"{source}: not an image (content is not a recognised image format, "
+                f"{len(data)} bytes; PNG, JPEG, TIFF, BMP, WebP and PNM are read)"
+            )
+        raise PanoramaError(f"{source}: corrupt or truncated {fmt} file ({len(data)} bytes)")
+    if size[0] * size[1] > max_pixels:
+        raise ImageTooLargeError(f"{source}: image is {size[0]}x{size[1]} px; {limit}")
 
 
 def decode_grey(data: bytes, source: str, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:

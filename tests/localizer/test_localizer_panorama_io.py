@@ -188,3 +188,11 @@ def test_bad_unwrap_names_file(tmp_path: Path, unwrap: MirrorUnwrap, problem: st
 def test_unwrap_rejects_non_uint8_array() -> None:
     with pytest.raises(PanoramaError, match=r"<array>.*uint8"):
         unwrap_omni(np.zeros((50, 50), np.float32), MirrorUnwrap(25, 25, 5, 20))
+
+
+def test_an_image_whose_size_the_header_does_not_give_is_refused_undecoded(tmp_path):
+    """A Radiance .hdr: OpenCV decodes it, but its size cannot be checked first (issue 11)."""
+    path = tmp_path / "wide.hdr"
+    assert cv2.imwrite(str(path), np.ones((400, 9000, 3), np.float32))
+    with pytest.raises(PanoramaError, match=r"not an image .* PNG, JPEG, TIFF, BMP, WebP and PNM"):
+        read_grey_image(path, max_pixels=1000)

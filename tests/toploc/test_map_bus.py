@@ -5,6 +5,7 @@ added without a restart."""
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import time
 from collections.abc import Iterator
@@ -91,8 +92,21 @@ def test_a_place_added_over_the_bus_is_in_the_map_and_in_the_next_localization(s
     localizer = LocalizerClient(client.session, ROBOT_ID, timeout_s=10, localize_timeout_s=60)
     belief = localizer.localize(active=False)
     assert belief["best_place"]["place_id"] == place_id
-    again = client.add(encode_png(here), "kitchen")
+    again = client.add(encode_png(here), "kitchen", x_m=2.2, y_m=2.9, heading_deg=75.0)
     assert again["place_id"] == place_id and not again["new"]
+
+
+def test_the_same_image_under_another_room_is_a_conflict_that_adds_nothing(service, client):
+    _, _, db_path = service
+    image = encode_png(robot_in("kitchen", 1.4, 2.0, 10.0).capture().image)
+    client.add(image, "kitchen", x_m=1.4, y_m=2.0, heading_deg=10.0)
+    before = n_places(db_path)
+    with pytest.raises(bus.BusReplyError, match=r"already place .* of room 'kitchen'"):
+        client.add(image, "office_a", x_m=1.4, y_m=2.0, heading_deg=10.0)
+    conflict = re.escape("sent for room 'kitchen' at (1.4, 2.0, None)")
+    with pytest.raises(bus.BusReplyError, match=conflict):
+        client.add(image, "kitchen", x_m=1.4, y_m=2.0)
+    assert n_places(db_path) == before
 
 
 def test_a_new_room_and_its_edge_reach_the_localizer(service, client):

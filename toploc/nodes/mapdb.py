@@ -37,7 +37,7 @@ import zenoh
 from localizer.panorama_io import decode_grey
 from mapdb.database import MapDatabase
 from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
-from mapdb.records import NewPlace, check_name
+from mapdb.records import NewPlace, Place, check_name
 from toploc import bus
 from toploc.limits import Limits
 
@@ -69,6 +69,18 @@ def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
 
 def _named(where: str, field: str, error: ValueError) -> bus.BusMessageError:
     return bus.BusMessageError(f"{where}: field {field!r}: {error}")
+
+
+def _check_same_place(where: str, stored: Place, sent: NewPlace) -> None:
+    """Raise BusMessageError unless ``sent`` (the same image as ``stored``) names its room and
+    pose: the same image under two rooms or poses is a conflict, not a repeat."""
+    stored_pose = (stored.x_m, stored.y_m, stored.heading_deg)
+    sent_pose = (sent.x_m, sent.y_m, sent.heading_deg)
+    if stored.room != sent.room or stored_pose != sent_pose:
+        raise bus.BusMessageError(
+            f"{where}: this image is already place {stored.id} of room {stored.room!r} at "
+            f"{stored_pose}; it was sent for room {sent.room!r} at {sent_pose}: nothing added"
+        )
 
 
 class MapNode:
@@ -135,7 +147,13 @@ class MapNode:
     def _on_places(self, payload: bytes | None) -> bus.Reply:
         room = None
         if payload:
-            request = bus.decode(self.key(bus.MAP_PLACES), payload)
+            limits = self.limits
+            request = bus.decode(
+                self.key(bus.MAP_PLACES),
+                payload,
+                max_bytes=limits.max_request_bytes,
+                max_string_chars=limits.max_string_chars,
+            )
             if "room" in request:
                 bus.check_fields(self.key(bus.MAP_PLACES), request, {"room": str})
                 room = request["room"]
@@ -220,11 +238,12 @@ class MapNode:
                 place_id, new = map_db.add_place(place, fingerprints), True
             except DuplicatePlaceError as error:
                 place_id, new = error.place_id, False
+                _check_same_place(where, map_db.place(place_id), place)
         if new:
             self._changed()
         reply = {
             "place_id": place_id,
-            "room": place.room,
+            "room": place.room,  # the stored one: a repeat must name the same room
             "new": new,
             "fingerprints": {f.detector: f.n for f in fingerprints},
             "refresh_after_s": self.refresh_after_s,

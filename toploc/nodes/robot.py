@@ -36,7 +36,12 @@ import cv2
 import numpy as np
 import zenoh
 
-from localizer.panorama_io import MAX_IMAGE_PIXELS, PanoramaError, check_image_header
+from localizer.panorama_io import (
+    MAX_IMAGE_PIXELS,
+    ImageTooLargeError,
+    PanoramaError,
+    check_image_header,
+)
 from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robot
 from toploc import bus
 from toploc.limits import Limits, RateLimit
@@ -91,18 +96,21 @@ def encode_png(image: np.ndarray) -> bytes:
 def decode_png(key_expr: str, data: bytes, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
     """The image in PNG ``data`` received on ``key_expr``; BusMessageError if it is not one, or
     (read from its header, before decoding) has more than ``max_pixels`` pixels."""
+    not_an_image = bus.BusMessageError(
+        f"{key_expr}: reply is not a decodable image ({len(data)} bytes, starts {data[:8]!r})"
+    )
     try:
         check_image_header(data, key_expr, max_pixels)
-    except PanoramaError as error:
+    except ImageTooLargeError as error:
         raise bus.BusMessageError(str(error)) from None
+    except PanoramaError:
+        raise not_an_image from None
     try:
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error:
         image = None
     if image is None:
-        raise bus.BusMessageError(
-            f"{key_expr}: reply is not a decodable image ({len(data)} bytes, starts {data[:8]!r})"
-        )
+        raise not_an_image
     return image
 
 
