@@ -354,8 +354,8 @@ class P2osBase:
             raise ValueError(
                 f"move needs finite turn_rad and forward_m, got {turn_rad}, {forward_m}"
             )
+        self._stop_move.clear()  # before connecting: a stop() during a reconnect still counts
         self.ensure_connected()
-        self._stop_move.clear()
         try:
             turned = self._turn(float(wrap_angle_rad(turn_rad)))
             if self._stop_move.is_set():

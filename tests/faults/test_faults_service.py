@@ -293,3 +293,43 @@ def test_an_oversized_capture_is_refused_from_its_header():
     png = cv2.imencode(".png", np.zeros((4000, 20000), np.uint8))[1].tobytes()  # 80 MP, a few kB
     with pytest.raises(bus.BusMessageError, match="image is 20000x4000 px; at most 75000000"):
         decode_png("camera/capture", png)
+
+
+class CameraHoldsTheLock(SlowRobot):
+    """A robot whose capture takes ``capture_s`` (a pan sweep re-stitched, a slow webcam)."""
+
+    def __init__(self, capture_s: float) -> None:
+        super().__init__()
+        self.capture_s = capture_s
+
+    def capture(self) -> Capture:
+        time.sleep(self.capture_s)
+        return super().capture()
+
+
+def test_a_stop_while_a_move_waits_for_the_robot_cancels_it(zbus):
+    robot = CameraHoldsTheLock(capture_s=1.0)
+    with RobotNode(zbus.server, ROBOT_ID, robot):
+        zbus.wait_alive("robot")
+        remote = RemoteRobot(zbus.client, ROBOT_ID, timeout_s=5.0, move_timeout_s=5.0)
+        capturing = threading.Thread(target=remote.capture)
+        capturing.start()
+        time.sleep(0.2)  # the capture holds the robot lock for a second
+        outcome: list[object] = []
+
+        def move() -> None:
+            try:
+                outcome.append(remote.move(0.0, 1.0))
+            except bus.BusReplyError as error:
+                outcome.append(error)
+
+        mover = threading.Thread(target=move)
+        mover.start()
+        time.sleep(0.2)  # the move is accepted and waits for the lock
+        remote.stop()
+        mover.join(10.0)
+        capturing.join(10.0)
+        remote.close()
+    assert robot.moves == []  # before: the move started after the stop and drove 1 m
+    assert isinstance(outcome[0], bus.BusReplyError)
+    assert "base/stop came before the move started" in str(outcome[0])

@@ -301,10 +301,11 @@ def test_liveliness_tokens_come_and_go(zbus, tmp_path):
         LocalizerNode(zbus.server, ROBOT_ID, FakeService()),
         MapNode(zbus.server, ROBOT_ID, tmp_path / "map.db"),
     ):
-        assert wait_for(lambda: alive_nodes(zbus.client) == {"robot", "localizer", "mapdb"})
+        everyone = {"robot", "localizer", "mapdb"}
+        assert wait_for(lambda: alive_nodes(zbus.client) == everyone, timeout_s=10.0)
         robot_node.close()
-        assert wait_for(lambda: alive_nodes(zbus.client) == {"localizer", "mapdb"})
-    assert wait_for(lambda: alive_nodes(zbus.client) == set())
+        assert wait_for(lambda: alive_nodes(zbus.client) == {"localizer", "mapdb"}, 10.0)
+    assert wait_for(lambda: alive_nodes(zbus.client) == set(), timeout_s=10.0)
     assert alive_nodes(zbus.client, "other") == set()
 
 

@@ -128,6 +128,10 @@ def check_command(where: str, command: dict[str, Any], limits: Limits) -> None:
         )
 
 
+class MoveStoppedError(RuntimeError):
+    """A move was cancelled by ``base/stop`` (or its timeout) before it started."""
+
+
 class RobotNode:
     """Serve ``robot`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``). ``camera``: where ``camera/capture`` takes its panoramas (a camera that is
@@ -152,6 +156,7 @@ class RobotNode:
         # One thread runs the moves, so that a move past its timeout can be stopped and answered.
         self._mover = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="base-move")
         self._capture_ids = itertools.count(1)
+        self._stops = 0  # counts base/stop; a move checks only that it changed
         k = self.key
         self._panorama = session.declare_publisher(k(bus.CAMERA_PANORAMA))
         self._odom = session.declare_publisher(k(bus.BASE_ODOM))
@@ -201,8 +206,12 @@ class RobotNode:
         self._panorama.put(reply.payload, attachment=reply.attachment)
         return reply
 
-    def _move(self, turn_deg: float, forward_m: float) -> tuple[MoveResult, Odometry]:
-        with self._lock:
+    def _move(
+        self, turn_deg: float, forward_m: float, stops_seen: int
+    ) -> tuple[MoveResult, Odometry]:
+        with self._lock:  # a capture may hold it for seconds: a stop meanwhile cancels the move
+            if self._stops != stops_seen:
+                raise MoveStoppedError("base/stop came before the move started: not moved")
             return self.robot.move(math.radians(turn_deg), forward_m), self.robot.odometry()
 
     def _on_cmd(self, payload: bytes | None) -> bus.Reply:
@@ -212,10 +221,14 @@ class RobotNode:
             where, payload, CMD_FIELDS, "cmd", limits.max_request_bytes, limits.max_string_chars
         )
         check_command(where, command, self.limits)
-        running = self._mover.submit(self._move, command["turn_deg"], command["forward_m"])
+        running = self._mover.submit(
+            self._move, command["turn_deg"], command["forward_m"], self._stops
+        )
         try:
             result, odometry = running.result(timeout=self.limits.move_timeout_s)
         except concurrent.futures.TimeoutError:
+            self._stops += 1  # the move, if it has not started, never will
+            running.cancel()
             self.robot.stop()
             raise TimeoutError(
                 f"{where}: the move did not finish within {self.limits.move_timeout_s:g} s; "
@@ -233,6 +246,7 @@ class RobotNode:
         return bus.Reply(bus.encode("move", move))
 
     def _on_stop(self, _payload: bytes | None) -> bus.Reply:
+        self._stops += 1  # a move still waiting for the robot lock will not start
         self.robot.stop()
         return bus.Reply(bus.encode("stopped", {"stopped": True}))
 
