@@ -145,23 +145,32 @@ def test_only_the_operator_may_drive_the_robot(files, service):
         start = time.monotonic()
         with pytest.raises(bus.BusTimeout, match="base/cmd: no reply"):
             viewer.move(0.0, 1.0)
-        assert time.monotonic() - start < 1.0  # denied at once: no reply, not a timeout
+        assert time.monotonic() - start < 1.9  # denied at once, before the 2 s timeout
         with pytest.raises(bus.BusTimeout, match="camera/capture: no reply"):
             viewer.capture()
     assert service.robot.moves == [(0.0, 0.5)]
 
 
-def test_only_the_operator_may_put_on_map_add(files, service):
-    added: list[bytes] = []
-    service.session.declare_subscriber(
-        bus.key(ROBOT_ID, "map/add"), lambda sample: added.append(sample.payload.to_bytes())
-    )
-    for user in ("viewer", "operator"):
-        with service.peer(files.user(user)) as session:
-            time.sleep(0.2)  # the subscriber's declaration reaches the peer
-            session.put(bus.key(ROBOT_ID, "map/add"), user.encode())
-            wait_for(lambda: bool(added), 0.5)
-    assert added == [b"operator"]
+def test_only_the_operator_may_query_map_add(files, service):
+    """``map/add`` is a queryable: a viewer's query must not reach it (the map node's own
+    handler is tested in tests/toploc/test_map_bus.py; here one that records who got through)."""
+    reached: list[bytes] = []
+
+    def add(payload: bytes | None) -> bus.Reply:
+        reached.append(payload or b"")
+        return bus.Reply(bus.encode("added", {"place_id": len(reached)}))
+
+    queryable = bus.serve(service.session, bus.key(ROBOT_ID, bus.MAP_ADD), add)
+    try:
+        for user in ("viewer", "operator"):
+            with service.peer(files.user(user)) as session:
+                try:
+                    bus.request(session, bus.key(ROBOT_ID, bus.MAP_ADD), user.encode(), 2.0)
+                except bus.BusTimeout:
+                    assert user == "viewer"
+    finally:
+        queryable.undeclare()
+    assert reached == [b"operator"]
 
 
 @pytest.mark.parametrize(
@@ -226,7 +235,7 @@ def test_a_second_service_with_the_same_robot_id_refuses_to_start(tiny_map):
             start_service(tiny_map, second, FakeRobot()),
         ):
             pass
-        assert time.monotonic() - start < 2.0
+        assert time.monotonic() - start < 10.0  # a hang guard: the check itself waits <= 1 s
         assert str(refused.value) == (
             f"robot id '{ROBOT_ID}' already has a mapdb node on the bus "
             f"(toploc/{ROBOT_ID}/alive/mapdb); choose another --robot-id"

@@ -200,7 +200,7 @@ def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates
         building_map[0],
         runner,
         "sift",
-        settle_s=0.3,
+        settle_s=2.0,
         recalibrate=True,  # type: ignore[arg-type]
     )
     try:
