@@ -32,6 +32,7 @@ from __future__ import annotations
 import concurrent.futures
 import math
 import stat
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,7 +91,6 @@ class VideoReader:
         if not self._video.isOpened():
             self._video.release()
             raise CameraError(f"{where}: OpenCV cannot open {target!r} as a video device or file")
-        self._reader = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="camera-read")
         self._pending: concurrent.futures.Future[tuple[bool, np.ndarray | None]] | None = None
 
     def _read(self) -> tuple[bool, np.ndarray | None]:
@@ -100,11 +100,20 @@ class VideoReader:
             ok, frame = self._video.read()
         return ok, frame
 
+    def _read_into(self, result: concurrent.futures.Future[tuple[bool, np.ndarray | None]]) -> None:
+        try:
+            result.set_result(self._read())
+        except Exception as error:  # handed to the waiting read()
+            result.set_exception(error)
+
     def read(self) -> np.ndarray:
         """The next frame (uint8); CameraError if reading fails or takes over ``timeout_s``."""
         if self._pending is not None and not self._pending.done():
             raise CameraError(f"{self.where}: a previous read is still stuck in the driver")
-        self._pending = self._reader.submit(self._read)
+        # A daemon thread per read, not an executor: an executor's thread is joined at exit,
+        # so a read stuck in the driver (camera unplugged) would keep the process from exiting.
+        self._pending = concurrent.futures.Future()
+        threading.Thread(target=self._read_into, args=(self._pending,), daemon=True).start()
         try:
             ok, frame = self._pending.result(timeout=self.timeout_s)
         except concurrent.futures.TimeoutError:
@@ -116,9 +125,10 @@ class VideoReader:
         return frame
 
     def close(self) -> None:
-        """Release the device (a read stuck in the driver is abandoned)."""
-        self._reader.shutdown(wait=False, cancel_futures=True)
-        self._video.release()
+        """Release the device; with a read stuck in the driver it is left to the process's end
+        (releasing it under that read could crash OpenCV)."""
+        if self._pending is None or self._pending.done():
+            self._video.release()
 
 
 def dual_fisheye_maps(size_px: tuple[int, int], fov_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -183,14 +193,20 @@ class UvcCamera:
         self._video.close()
 
 
+def _is_regular(path: Path) -> bool:
+    """Whether ``path`` is a regular file now (a dangling symlink or a vanished file is not)."""
+    try:
+        return stat.S_ISREG(path.stat().st_mode)
+    except OSError:
+        return False
+
+
 def image_files(folder: Path, where: str) -> list[Path]:
     """The regular image files of ``folder`` by name (no sub-folders, FIFOs or other files)."""
     if not folder.is_dir():
         raise CameraError(f"{where}: {folder} is not a folder")
     files = sorted(
-        p
-        for p in folder.iterdir()
-        if p.suffix.lower() in IMAGE_SUFFIXES and stat.S_ISREG(p.stat().st_mode)
+        p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and _is_regular(p)
     )
     if not files:
         raise CameraError(f"{where}: {folder} has no image files ({', '.join(IMAGE_SUFFIXES)})")
@@ -240,7 +256,10 @@ class PtuCamera:
 
     def capture(self) -> Capture:
         files = image_files(self.folder, self.name)
-        key = [(p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in files]
+        try:
+            key = [(p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in files]
+        except OSError as error:  # a photo removed while we looked
+            raise CameraError(f"{self.name}: {error.filename}: {error.strerror}") from None
         if self._cache is None or self._cache[0] != key:
             self._cache = (key, self._stitch(files))
         return Capture(self._cache[1], time.time(), self.name)

@@ -19,6 +19,7 @@ from robot.camera_sources import (
     UvcCamera,
     VideoReader,
     dual_fisheye_maps,
+    image_files,
     open_source,
 )
 from robot.pan_stitching import view_from_equirect
@@ -243,3 +244,9 @@ def test_sim_is_the_robots_own_capture() -> None:
 
     camera = open_source("sim", Fake())  # type: ignore[arg-type]
     assert camera.capture().source == "sim:fake"
+
+
+def test_a_dangling_symlink_in_a_files_folder_is_skipped(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((8, 16), 50, np.uint8))
+    (tmp_path / "b.png").symlink_to(tmp_path / "gone.png")
+    assert [p.name for p in image_files(tmp_path, "files:test")] == ["a.png"]
