@@ -179,12 +179,6 @@ def start_service(
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
-        map_node = stack.enter_context(
-            MapNode(
-                session, robot_id, db_path, limits, str(localizer_config.camera),
-                detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
-            )
-        )  # fmt: skip
         if robot is not None:
             stack.enter_context(RobotNode(session, robot_id, robot, limits, camera))
         remote = RemoteRobot(
@@ -202,5 +196,11 @@ def start_service(
             db_path, runner, localizer_config.detector, refresh_settle_s, recalibrate
         )
         stack.callback(refresher.close)
-        map_node.on_change = refresher.changed
+        stack.enter_context(  # last: a place added as soon as it answers is refreshed too
+            MapNode(
+                session, robot_id, db_path, limits, str(localizer_config.camera),
+                detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
+                on_change=refresher.changed,
+            )
+        )  # fmt: skip
         yield Service(session, config, runner, localizer, refresher)

@@ -236,9 +236,9 @@ def test_a_second_service_with_the_same_robot_id_refuses_to_start(tiny_map):
         ):
             pass
         assert time.monotonic() - start < 10.0  # a hang guard: the check itself waits <= 1 s
-        assert str(refused.value) == (
-            f"robot id '{ROBOT_ID}' already has a mapdb node on the bus "
-            f"(toploc/{ROBOT_ID}/alive/mapdb); choose another --robot-id"
+        assert str(refused.value) == (  # the first node it starts is the robot's
+            f"robot id '{ROBOT_ID}' already has a robot node on the bus "
+            f"(toploc/{ROBOT_ID}/alive/robot); choose another --robot-id"
         )
         other = bus.BusConfig("r2", listen=(free_endpoint(),), connect=(first,))
         with start_service(tiny_map, other, FakeRobot()) as started:
@@ -261,7 +261,8 @@ def test_serve_refuses_a_taken_robot_id_in_one_line(tiny_map):
         args = ["serve", "--db", str(tiny_map), "--robot-id", "taken", "--no-sim"]
         done = CliRunner().invoke(main, [*args, "--listen", free_endpoint(), "--connect", first])
     assert done.exit_code == 1, done.output
-    assert "Error: robot id 'taken' already has a mapdb node on the bus" in done.output
+    # without a robot, the first node it starts is the localizer
+    assert "Error: robot id 'taken' already has a localizer node on the bus" in done.output
     assert "Traceback" not in done.output
 
 
