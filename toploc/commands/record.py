@@ -70,12 +70,11 @@ class Recorder:
         """Capture, add, print one line; the odometry position ``(x_m, y_m)`` it was taken at."""
         from toploc.nodes.robot import encode_png
 
-        odometry = self.odometry()
+        odometry = self.odometry()  # position and heading of one instant, just before capture
         capture = self.robot.capture()
-        heading_deg = float((self.robot.last_capture_meta or {}).get("heading_deg", 0.0))
         stored: Pose = (None, None, None)
         if self.pose == "odometry":
-            stored = (odometry.x_m, odometry.y_m, heading_deg)
+            stored = (odometry.x_m, odometry.y_m, math.degrees(odometry.heading_rad))
         elif self.pose == "given":
             stored = self.fixed
         reply = self.client.add(encode_png(capture.image), self.room, *stored)
