@@ -15,19 +15,14 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from mapdb_helpers import assert_consistent, table_counts, write_image
 
 from mapdb.records import Fingerprint
 
+__all__ = ["assert_consistent", "table_counts", "write_image"]  # the fault tests use them too
+
 REPO = Path(__file__).resolve().parents[2]
 MAPDB_TESTS = REPO / "tests" / "mapdb"
-
-
-def write_image(path: Path, seed: int, size_px: tuple[int, int] = (96, 24)) -> Path:
-    """A random grey PNG of ``size_px`` (width, height)."""
-    image = np.random.default_rng(seed).integers(0, 256, (size_px[1], size_px[0]), np.uint8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    assert cv2.imwrite(str(path), image)
-    return path
 
 
 def make_dataset(folder: Path, n: int, rooms: tuple[str, ...] = ("kitchen", "hall")) -> Path:
@@ -93,27 +88,6 @@ def live_session_members(session_id: int) -> list[int]:
         if session == session_id and state not in ("Z", "X"):
             members.append(int(entry.name))
     return members
-
-
-def table_counts(path: Path) -> dict[str, int]:
-    """Row counts of the map tables."""
-    with sqlite3.connect(path) as conn:
-        return {
-            table: conn.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
-            for table in ("rooms", "edges", "places", "fingerprints")
-        }
-
-
-def assert_consistent(path: Path, detectors: int = 2) -> None:
-    """Integrity check passes, no dangling rows, every place has ``detectors`` fingerprints."""
-    with sqlite3.connect(path) as conn:
-        assert conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
-        assert conn.execute("PRAGMA foreign_key_check").fetchall() == []
-        per_place = conn.execute(
-            "SELECT p.id, COUNT(f.id) FROM places p LEFT JOIN fingerprints f "
-            "ON f.place_id = p.id GROUP BY p.id"
-        ).fetchall()
-    assert all(count == detectors for _, count in per_place), per_place
 
 
 def fake_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> list[Fingerprint]:

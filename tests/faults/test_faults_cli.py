@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from bus_helpers import free_port, wait_for
 from click.testing import CliRunner
+from robot_helpers import RobotWrapper
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
@@ -96,27 +97,18 @@ def test_debug_shows_the_traceback_of_an_unexpected_error(monkeypatch, building_
     assert isinstance(result.exception, RuntimeError)
 
 
-class SlowCameraRobot:
+class SlowCameraRobot(RobotWrapper):
     """The simulated robot in office_b, whose camera takes ``capture_s`` per panorama."""
 
     def __init__(self, capture_s: float) -> None:
         world = make_world("building")
         pose = world.building_pose("office_b", Pose2D(2.0, 2.5, 0.3))
-        self.robot = SimulatedRobot(world, pose, camera=PanoramaCamera(512, 96), seed=3)
+        super().__init__(SimulatedRobot(world, pose, camera=PanoramaCamera(512, 96), seed=3))
         self.capture_s = capture_s
 
     def capture(self) -> Capture:
         time.sleep(self.capture_s)
         return self.robot.capture()
-
-    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
-        return self.robot.move(turn_rad, forward_m)
-
-    def odometry(self) -> Odometry:
-        return self.robot.odometry()
-
-    def stop(self) -> None:
-        self.robot.stop()
 
 
 def test_stopping_the_service_during_an_active_localization_is_quick(building_map, caplog):

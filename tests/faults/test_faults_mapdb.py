@@ -23,7 +23,6 @@ import pytest
 from click.testing import CliRunner, Result
 from faults_mapdb_helpers import (
     REPO,
-    assert_consistent,
     can_bind_mount_read_only,
     fake_extract,
     live_session_members,
@@ -34,9 +33,9 @@ from faults_mapdb_helpers import (
     places_so_far,
     run_toploc,
     start_slow_build,
-    write_image,
     write_manifest,
 )
+from mapdb_helpers import assert_consistent, write_image
 
 from mapdb.build import build_map
 from mapdb.database import MapDatabase

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 from bus_helpers import ROBOT_ID, wait_for
+from robot_helpers import RobotWrapper
 
 from localizer.belief import BeliefFilter
 from localizer.localizer import LoadedMap, Localizer
@@ -182,11 +183,11 @@ def test_the_rate_limit_admits_again_after_its_window():
 # --- localizer/localize ----------------------------------------------------------------------
 
 
-class GatedRobot:
+class GatedRobot(RobotWrapper):
     """The kitchen robot, whose captures wait for ``gate`` and are counted."""
 
     def __init__(self) -> None:
-        self.robot = robot_in_kitchen()
+        super().__init__(robot_in_kitchen())
         self.gate = threading.Event()
         self.captures = 0
 
@@ -194,15 +195,6 @@ class GatedRobot:
         self.captures += 1
         self.gate.wait(10.0)
         return self.robot.capture()
-
-    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
-        return self.robot.move(turn_rad, forward_m)
-
-    def odometry(self) -> Odometry:
-        return self.robot.odometry()
-
-    def stop(self) -> None:
-        self.robot.stop()
 
 
 def test_localize_queries_whose_clients_gave_up_are_dropped_unrun(zbus, building):

@@ -10,6 +10,7 @@ import threading
 
 import pytest
 from click.testing import CliRunner
+from robot_helpers import RobotWrapper
 
 from localizer.localizer import LoadedMap, Localizer
 from mapdb.loading import load_snapshot
@@ -38,25 +39,17 @@ def robot_in(room: str, x_m: float, y_m: float) -> SimulatedRobot:
     return SimulatedRobot(world, pose, camera=CAMERA, seed=9)
 
 
-class GatedRobot:
+class GatedRobot(RobotWrapper):
     """A simulated robot whose capture waits until the test opens the gate."""
 
     def __init__(self, robot: SimulatedRobot) -> None:
-        self.robot, self.gate, self.waiting = robot, threading.Event(), threading.Event()
+        super().__init__(robot)
+        self.gate, self.waiting = threading.Event(), threading.Event()
 
     def capture(self):
         self.waiting.set()
         self.gate.wait(10)
         return self.robot.capture()
-
-    def move(self, turn_rad, forward_m):
-        return self.robot.move(turn_rad, forward_m)
-
-    def odometry(self):
-        return self.robot.odometry()
-
-    def stop(self):
-        self.robot.stop()
 
 
 @pytest.fixture(scope="module")
