@@ -18,7 +18,7 @@ import click
 
 from toploc import bus
 from toploc.bus_config import client_bus_config
-from toploc.commands.options import robot_id_option, zenoh_config_option
+from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 
 def format_belief(belief: dict[str, Any]) -> str:
@@ -42,13 +42,7 @@ def format_belief(belief: dict[str, Any]) -> str:
 
 @click.command("belief")
 @robot_id_option
-@click.option(
-    "--connect",
-    "endpoints",
-    multiple=True,
-    help=f"Zenoh endpoint of the service (repeatable; default: the --zenoh-config file's, else "
-    f"{bus.DEFAULT_ENDPOINT}).",
-)
+@service_endpoint_option
 @zenoh_config_option
 @click.option("--localize", is_flag=True, help="Localize now before printing the belief.")
 @click.option("--active", is_flag=True, help="Localize and allow moving to disambiguate.")

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from localizer.cameras import parse_camera
-from toploc.bus import BusConfig, check_robot_id, default_robot_id
+from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
 from toploc.bus_config import exposure_warning
 
 
@@ -45,6 +45,15 @@ robot_id_option = click.option(
     callback=_check_robot_id,
     help="The robot id in the keys (toploc/<robot-id>/...).",
 )
+
+service_endpoint_option = click.option(
+    "--connect",
+    "endpoints",
+    multiple=True,
+    help=f"Zenoh endpoint of the service (repeatable; default: the --zenoh-config file's, else "
+    f"{DEFAULT_ENDPOINT}).",
+)
+"""A client command's ``--connect`` (the ``endpoints`` parameter)."""
 
 zenoh_config_option = click.option(
     "--zenoh-config",

@@ -26,7 +26,7 @@ from localizer.robot_protocol import Odometry
 from mapdb.records import check_name
 from toploc import bus
 from toploc.bus_config import client_bus_config
-from toploc.commands.options import robot_id_option, zenoh_config_option
+from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 if TYPE_CHECKING:
     from toploc.nodes.mapdb import MapClient
@@ -145,13 +145,7 @@ def follow(
     help="With --every-m: stop after this many panoramas.",
 )
 @robot_id_option
-@click.option(
-    "--connect",
-    "endpoints",
-    multiple=True,
-    help=f"Zenoh endpoint of the service (repeatable; default: the --zenoh-config file's, else "
-    f"{bus.DEFAULT_ENDPOINT}).",
-)
+@service_endpoint_option
 @zenoh_config_option
 @click.option(
     "--timeout",
