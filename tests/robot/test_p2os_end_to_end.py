@@ -19,6 +19,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -74,7 +75,7 @@ def _toploc(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[
 def simulator() -> Iterator[P2osSimulator]:
     world = make_world(WORLD)
     start = random_free_pose(Obstacles.of(world, 0.2), "office_a", np.random.default_rng(3))
-    with P2osSimulator(world, start, seed=3) as sim:
+    with P2osSimulator(world, start, time_scale=4.0, cycle_s=0.05, seed=3) as sim:
         yield sim
 
 
@@ -113,15 +114,25 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
                 localizer = LocalizerClient(session, robot_id)
                 with pytest.raises(bus.BusReplyError, match="the map has no places yet"):
                     localizer.belief()
+                t0 = time.monotonic()
                 _record_map(session, robot_id, bus_args)
-                assert wait_for(lambda: _rooms(localizer) == 3, 30.0), _rooms(localizer)
+                t1 = time.monotonic()
+                recorded_s = time.time()  # the map refresh after the last place comes later
+                assert wait_for(lambda: _reloaded(localizer, recorded_s), 30.0)
+                t2 = time.monotonic()
 
                 kidnap = bus.encode("kidnap", {"room": "office_b"})
                 where = bus.request_json(
                     session, bus.key(robot_id, bus.SIM_KIDNAP), TRUE_POSE_FIELDS, kidnap
                 )
                 assert where["room"] == "office_b" == truth.publish()["room"]
+                before = len(simulator.commands())
                 done = _toploc("belief", "--active", "--json", *bus_args, timeout_s=240.0)
+                t3 = time.monotonic()
+                during = simulator.commands()[before:]
+                moves = during.count(Command.DHEAD) + during.count(Command.VEL)
+                print(f"record {t1 - t0:.1f} s, refresh {t2 - t1:.1f} s, localize {t3 - t2:.1f} s "
+                      f"({moves} DHEAD/VEL commands)")  # fmt: skip
                 belief = json.loads(done.stdout[done.stdout.index("{") :])
                 true_room = truth.publish()["room"]
         print(f"true room {true_room}; final belief {belief['rooms']} ({belief['state']})")
@@ -138,11 +149,12 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
     )
 
 
-def _rooms(localizer: LocalizerClient) -> int:
-    try:
-        return len(localizer.belief()["rooms"])
-    except bus.BusReplyError:  # no places yet
-        return 0
+def _reloaded(localizer: LocalizerClient, after_s: float) -> bool:
+    """Whether the service's belief is over the three rooms and newer than ``after_s``: the
+    map refresh that follows the last ``map/add`` (``REFRESH_SETTLE_S`` after it) re-reads
+    every place recorded."""
+    belief = localizer.belief()
+    return len(belief["rooms"]) == len(ROUTE) and belief["stamp"] > after_s
 
 
 def _record_map(session: zenoh.Session, robot_id: str, bus_args: tuple[str, ...]) -> None:
