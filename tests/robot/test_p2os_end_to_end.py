@@ -6,9 +6,9 @@ simulation-only side channel (``sim/true_pose``, ``sim/kidnap``: :mod:`toploc.no
 the pty like a real base and renders its camera at the true pose it receives over Zenoh. The
 map is recorded over the bus by ``toploc map record`` subprocesses while the test drives the base
 with ``base/cmd``; between rooms the base is carried (``sim/kidnap``), since driving through
-the doors is not what is tested. Then the base is kidnapped into a look-alike office and
-``toploc belief --active`` localizes it from another process. Only the pty and Zenoh join the
-processes; the commands the simulator received are the manual's.
+the doors is not what is tested. Then the README's client drives it and kidnaps it into the
+look-alike office_b, and ``toploc belief --active`` localizes it from another process. Only
+the pty and Zenoh join the processes; the commands the simulator received are the manual's.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Iterator
@@ -36,9 +37,10 @@ from tests.bus_helpers import alive_nodes, free_port, wait_for
 from toploc import bus
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.robot import MOVE_FIELDS
-from toploc.nodes.sim_truth import TRUE_POSE_FIELDS, SimTruthNode
+from toploc.nodes.sim_truth import TRUE_POSE_FIELDS, SimTruthNode, open_when_up
 
 REPO = Path(__file__).resolve().parents[2]
+README = REPO / "README.md"
 WORLD = "building"
 ROUTE = (("office_a", None), ("corridor", "office_a"), ("office_b", "corridor"))
 """The rooms recorded, in order, with the room each one's first panorama connects to."""
@@ -105,9 +107,16 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
         cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
-    config = bus.BusConfig(robot_id, listen=(), connect=(endpoint,))
+    # a Zenoh client of the service, as toploc sim p2os --bus is: the service routes queries
+    # from its other clients (the README's) to sim/kidnap
+    config = bus.BusConfig(robot_id, mode="client", listen=(), connect=(endpoint,))
     try:
-        with bus.open_session(config) as session:
+        gave_up = threading.Timer(30.0, lambda: None)  # serve listens within 30 s
+        gave_up.start()
+        session = open_when_up(config, gave_up.finished)
+        gave_up.cancel()
+        assert session is not None, _stop(serve)
+        with session:
             alive = lambda: {"robot", "localizer", "mapdb"} <= alive_nodes(session, robot_id)  # noqa: E731
             assert wait_for(lambda: serve.poll() is None and alive(), 30.0), _stop(serve)
             with SimTruthNode(session, robot_id, simulator, seed=5) as truth:
@@ -121,11 +130,8 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
                 assert wait_for(lambda: _reloaded(localizer, recorded_s), 30.0)
                 t2 = time.monotonic()
 
-                kidnap = bus.encode("kidnap", {"room": "office_b"})
-                where = bus.request_json(
-                    session, bus.key(robot_id, bus.SIM_KIDNAP), TRUE_POSE_FIELDS, kidnap
-                )
-                assert where["room"] == "office_b" == truth.publish()["room"]
+                exec(compile(_readme_client(robot_id, endpoint), "README.md", "exec"), {})
+                assert truth.publish()["room"] == "office_b"  # the README's drive and kidnap
                 before = len(simulator.commands())
                 done = _toploc("belief", "--active", "--json", *bus_args, timeout_s=240.0)
                 t3 = time.monotonic()
@@ -147,6 +153,14 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
     assert {Command.ENABLE, Command.PULSE, Command.DHEAD, Command.VEL, Command.STOP} <= set(
         commands
     )
+
+
+def _readme_client(robot_id: str, endpoint: str) -> str:
+    """The README's Python client of "On a real robot" (drive, then kidnap into office_b)."""
+    section = README.read_text(encoding="utf-8").split("## On a real robot", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    assert "bus.SIM_KIDNAP" in code and '"office_b"' in code
+    return code.replace('"tcp/127.0.0.1:7447"', repr(endpoint)).replace('"pioneer"', repr(robot_id))
 
 
 def _reloaded(localizer: LocalizerClient, after_s: float) -> bool:

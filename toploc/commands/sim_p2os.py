@@ -10,6 +10,7 @@ from __future__ import annotations
 import signal
 import threading
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -18,10 +19,9 @@ import numpy as np
 from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
-from toploc.bus import BusError, open_session
 from toploc.bus_config import client_bus_config
 from toploc.commands.options import robot_id_option, zenoh_config_option
-from toploc.nodes.sim_truth import SimTruthNode
+from toploc.nodes.sim_truth import SimTruthNode, open_when_up
 
 FAULTS = ("garbage", "truncated", "checksum", "mute")
 
@@ -98,17 +98,23 @@ def p2os(
     with ExitStack() as stack:
         stack.enter_context(sim)
         click.echo(f"port: {sim.port}")
-        if on_bus:
-            try:
-                config = client_bus_config(robot_id, zenoh_file, connect or None)
-                session = stack.enter_context(open_session(config))
-            except (BusError, ValueError) as error:
-                raise click.ClickException(str(error)) from None
-            stack.enter_context(SimTruthNode(session, robot_id, sim, seed=seed))
-            click.echo(f"true pose on toploc/{robot_id}/sim/true_pose (simulation only)")
         click.echo(
             f"a simulated Pioneer in {world}/{room} at ({pose.x_m:.2f}, {pose.y_m:.2f}) m; "
             f"connect with: toploc serve --robot p2os:{sim.port}. Ctrl-C stops."
         )
+        if on_bus:
+            try:
+                # a Zenoh client: the service routes its other clients' queries to it (peers
+                # that listen nowhere do not reach each other through a third)
+                config = client_bus_config(robot_id, zenoh_file, connect or None)
+                config = replace(config, mode="client")
+            except ValueError as error:
+                raise click.ClickException(str(error)) from None
+            click.echo(f"waiting for the service at {', '.join(config.connect)} ...")
+            session = open_when_up(config, stop)
+            if session is not None:
+                stack.enter_context(session)
+                stack.enter_context(SimTruthNode(session, robot_id, sim, seed=seed))
+                click.echo(f"true pose on toploc/{robot_id}/sim/true_pose (simulation only)")
         stop.wait()
     click.echo("stopped")

@@ -64,6 +64,19 @@ def true_pose_fields(sim: P2osSimulator) -> dict[str, Any]:
     }
 
 
+def open_when_up(
+    config: bus.BusConfig, stop: threading.Event, retry_s: float = 0.5
+) -> zenoh.Session | None:
+    """A session of ``config`` (a Zenoh client: it cannot open before the service it connects
+    to listens), tried every ``retry_s`` until it opens; None if ``stop`` is set first."""
+    while True:
+        try:
+            return bus.open_session(config)
+        except bus.BusError:
+            if stop.wait(retry_s):
+                return None
+
+
 class SimTruthNode:
     """Publish ``sim``'s true pose on ``sim/true_pose`` every ``period_s`` and serve
     ``sim/kidnap`` (kidnap poses seeded by ``seed``); ``close()`` (or ``with``)."""
