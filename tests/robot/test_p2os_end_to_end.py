@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
+from bus_helpers import alive_nodes, free_port, wait_for
 
 from robot.p2os_protocol import Command
 from robot.p2os_sim import P2osSimulator
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import make_world
-from bus_helpers import alive_nodes, free_port, wait_for
 from toploc import bus
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.robot import MOVE_FIELDS
