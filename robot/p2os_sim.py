@@ -238,6 +238,20 @@ class P2osSimulator:
         with self._lock:
             return self._state.pose
 
+    def teleport(self, pose: Pose2D) -> None:
+        """Put the base at ``pose`` (building frame) at once, the wheels stopped, as a person
+        carrying it would (a kidnap): the odometry is not told. ``ValueError`` if the pose is
+        not free."""
+        if not self.obstacles.free(np.array([[pose.x_m, pose.y_m]]))[0]:
+            raise ValueError(f"pose ({pose.x_m}, {pose.y_m}) m is not free in {self.world.name!r}")
+        with self._lock:
+            s = self._state
+            s.pose = Pose2D(pose.x_m, pose.y_m, float(wrap_angle_rad(pose.heading_rad)))
+            s.vel_m_s = s.rvel_rad_s = 0.0
+            s.heading_target_rad = None
+            s.front_bumpers = s.rear_bumpers = 0
+            s.stalled = False
+
     def commands(self) -> list[int]:
         """The command numbers received so far, in order."""
         with self._lock:

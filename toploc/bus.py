@@ -77,6 +77,10 @@ MAP_PLACES = "map/places"
 MAP_EDGES = "map/edges"
 MAP_ADD = "map/add"
 MAP_CONNECT = "map/connect"
+SIM_TRUE_POSE = "sim/true_pose"
+"""Simulation only: the simulated base's true pose (:mod:`toploc.nodes.sim_truth`)."""
+SIM_KIDNAP = "sim/kidnap"
+"""Simulation only: carry the simulated base into a room (:mod:`toploc.nodes.sim_truth`)."""
 
 _FORBIDDEN_CHUNK_CHARS = set("/*$?#")
 _log = logging.getLogger(__name__)

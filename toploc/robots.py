@@ -5,8 +5,9 @@
   protocol (:class:`robot.p2os_base.P2osBase`), with a sim camera rendering at the simulated
   base's true pose: the whole loop over the real protocol;
 - ``p2os:PORT``: a real Pioneer base on serial port ``PORT``. It has no camera of its own: the
-  service captures from ``--source`` (:mod:`robot.camera_sources`); without one, captures are
-  errors, motion and odometry work.
+  service captures from ``--source`` (:mod:`robot.camera_sources`); with ``--source sim`` the
+  camera is a sim camera rendering at the true pose a ``toploc sim p2os --bus`` on that port
+  publishes (:func:`true_pose_camera`; simulation only).
 """
 
 from __future__ import annotations
@@ -15,12 +16,15 @@ from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Camera, Robot
+from mapdb.database import MapDatabase
 from robot.p2os_base import P2osBase
 from robot.p2os_robot import BaseWithCamera, NoCamera, SimCamera
 from robot.p2os_sim import P2osSimulator
+from robot.render import PanoramaCamera
 from robot.worlds import make_world
 from toploc.maps import kidnapped_robot
+from toploc.nodes.sim_truth import TruePose
 
 ROBOT_SPECS = "sim | p2os-sim | p2os:PORT"
 
@@ -34,13 +38,33 @@ def parse_robot_spec(spec: str) -> tuple[str, str | None]:
     raise ValueError(f"a robot is {ROBOT_SPECS}, got {spec!r}")
 
 
+def true_pose_camera(
+    world: str, robot_id: str, db_path: Path, seed: int
+) -> tuple[SimCamera, TruePose]:
+    """A sim camera of ``world`` rendering at the true pose a simulator in another process
+    publishes (feed the :class:`TruePose` with :func:`toploc.nodes.sim_truth.
+    subscribe_true_pose`); panoramas of the map's size, the default size for an empty map."""
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        places = map_db.places()
+    built = make_world(world)
+    size = (places[0].image_width_px, places[0].image_height_px) if places else None
+    camera = PanoramaCamera(*size, height_m=built.camera_height_m) if size else None
+    true_pose = TruePose(world, robot_id)
+    return SimCamera(built, true_pose, camera, seed=seed), true_pose
+
+
 @contextmanager
 def open_robot(
-    spec: str | None, world: str, room: str, seed: int, db_path: Path
+    spec: str | None,
+    world: str,
+    room: str,
+    seed: int,
+    db_path: Path,
+    camera: Camera | None = None,
 ) -> Iterator[tuple[Robot | None, str]]:
     """The robot of ``spec`` and a description of it (``None``: no robot, the bus's robot node
-    is driven); a base is closed on exit. :class:`robot.p2os_base.P2osError` if a base does not
-    connect."""
+    is driven); a base is closed on exit; ``camera``: the camera of a ``p2os:PORT`` base (none
+    by default). :class:`robot.p2os_base.P2osError` if a base does not connect."""
     if spec is None:
         yield None, "the bus's robot node"
         return
@@ -51,7 +75,7 @@ def open_robot(
             base.connect()
             stack.callback(base.close)
             where = f"the Pioneer on {port} ({', '.join(base.robot_strings)})"
-            yield BaseWithCamera(base, NoCamera(f"the base on {port}")), where
+            yield BaseWithCamera(base, camera or NoCamera(f"the base on {port}")), where
             return
         sim_robot = kidnapped_robot(make_world(world), room, seed, db_path)
         if kind == "sim":

@@ -10,6 +10,10 @@ A waiting localization whose client has given up (its ``deadline_s`` passed) is 
 it runs, and at most ``max_pending`` wait. ``stop()`` ends a running localization at its next
 capture or move (within about one feature extraction) and refuses new ones: what a service
 does on SIGTERM.
+
+A service may start on a map without places (a user about to record one): the runner then has
+no localizer, and ``belief``, ``localize`` and ``reset`` raise :class:`NoPlacesYetError` until
+the first :meth:`LocalizationRunner.replace_map` brings places.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from typing import Any
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
-from localizer.localizer import LoadedMap, Localizer
+from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 
 RESET_WAIT_S = 1.0
@@ -32,6 +36,13 @@ POLL_S = 0.1  # how often a waiting localization looks at its deadline and at st
 
 class LocalizationStoppedError(RuntimeError):
     """The service is stopping: the localization was ended, or not started."""
+
+
+class NoPlacesYetError(RuntimeError):
+    """The service's map has no places yet: nothing to localize against."""
+
+
+NO_PLACES_YET = "the map has no places yet: record some first (toploc map record)"
 
 
 class LocalizationDroppedError(TimeoutError):
@@ -69,19 +80,22 @@ class LocalizationRunner:
     """Localize ``robot`` against ``localizer``'s map on request; publish every new belief.
 
     ``publish`` is called with each belief message (e.g. ``LocalizerNode.publish``); it may be
-    set after construction, since the node needs the runner first.
+    set after construction, since the node needs the runner first. ``localizer`` None: the map
+    has no places yet; the first :meth:`replace_map` makes one with ``localizer_config``.
     """
 
     def __init__(
         self,
-        localizer: Localizer,
+        localizer: Localizer | None,
         robot: Robot,
         policy: str = "separating",
         params: ActiveParams | None = None,
         publish: Callable[[dict[str, Any]], object] | None = None,
         max_pending: int = 8,
+        localizer_config: LocalizerConfig | None = None,
     ) -> None:
-        self.localizer = localizer
+        self._localizer = localizer
+        self.localizer_config = localizer_config
         self._stopping = threading.Event()
         self.robot = StoppableRobot(robot, self._stopping)
         self.max_pending = max_pending
@@ -92,7 +106,14 @@ class LocalizationRunner:
         self.publish = publish
         self._run_lock = threading.Lock()
         self._snapshot_lock = threading.Lock()
-        self._latest = localizer.belief().to_json()
+        self._latest = None if localizer is None else localizer.belief().to_json()
+
+    @property
+    def localizer(self) -> Localizer:
+        """The localizer; :class:`NoPlacesYetError` while the map has no places."""
+        if self._localizer is None:
+            raise NoPlacesYetError(NO_PLACES_YET)
+        return self._localizer
 
     def _set(self, belief: RoomBelief) -> None:
         message = belief.to_json()
@@ -104,7 +125,10 @@ class LocalizationRunner:
     def belief(self) -> dict[str, Any]:
         """The latest belief (answers at once, also while a localization runs)."""
         with self._snapshot_lock:
-            return dict(self._latest)
+            latest = self._latest
+        if latest is None:
+            raise NoPlacesYetError(NO_PLACES_YET)
+        return dict(latest)
 
     def _wait_for_turn(self, deadline_s: float | None) -> None:
         """Take the run lock, or raise: stopping, or ``deadline_s`` (``time.monotonic()``)
@@ -144,16 +168,18 @@ class LocalizationRunner:
         still waiting for its turn then is dropped (:class:`LocalizationDroppedError`).
         :class:`LocalizationStoppedError` after :meth:`stop`.
         """
+        localizer = self.localizer  # NoPlacesYetError at once, not after waiting
         self._wait_for_turn(deadline_s)
         try:
+            localizer = self.localizer  # replaced while this one waited
             if active:
                 result = localize_actively(
-                    self.localizer, self.robot, self.policy, self.params, on_belief=self._set
+                    localizer, self.robot, self.policy, self.params, on_belief=self._set
                 )
                 belief = result.final
             else:
-                observation = self.localizer.observe(self.robot.capture().image)
-                belief = self.localizer.update(observation)
+                observation = localizer.observe(self.robot.capture().image)
+                belief = localizer.update(observation)
             self._set(belief)
             return self.belief()
         finally:
@@ -183,7 +209,11 @@ class LocalizationRunner:
         try:
             if self._stopping.is_set():
                 return False
-            self._set(self.localizer.replace_map(loaded))
+            if self._localizer is None:  # the first places of a map that had none
+                self._localizer = Localizer(loaded, self.localizer_config)
+                self._set(self._localizer.belief())
+            else:
+                self._set(self._localizer.replace_map(loaded))
         finally:
             self._run_lock.release()
         return True
@@ -192,6 +222,7 @@ class LocalizationRunner:
         """Uniform belief, or ``prior``; ``RuntimeError`` while a localization is running."""
         if self._stopping.is_set():
             raise LocalizationStoppedError("the service is stopping")
+        self.localizer  # noqa: B018 (NoPlacesYetError while the map has none)
         if not self._run_lock.acquire(timeout=RESET_WAIT_S):
             raise RuntimeError("a localization is running; reset when it has finished")
         try:

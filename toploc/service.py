@@ -10,6 +10,9 @@ A map that grows over the bus (``map/add``, ``map/connect``) is picked up withou
 it into the localizer between two localizations (the next one uses the new places), then, if
 asked, re-calibrates the likelihood on the grown map (about 20 s per detector here) and swaps
 the map in again with it.
+
+With ``allow_empty`` a map without places is served too (a user about to record one): the
+localizer keys answer "the map has no places yet" until the first places are recorded.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from localizer.features import params_from_preset
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Camera, Robot
 from mapdb.database import MapDatabase
+from mapdb.loading import open_for_reading
 from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
@@ -143,12 +147,12 @@ class MapRefresher:
 @dataclass(frozen=True)
 class Service:
     """A running service: its session, the runner behind ``localizer/*``, the map (as first
-    loaded) and what keeps it fresh."""
+    loaded; None for a map without places) and what keeps it fresh."""
 
     session: zenoh.Session
     config: BusConfig
     runner: LocalizationRunner
-    localizer: Localizer
+    localizer: Localizer | None
     refresher: MapRefresher
 
 
@@ -163,19 +167,22 @@ def start_service(
     camera: Camera | None = None,
     refresh_settle_s: float = REFRESH_SETTLE_S,
     recalibrate: bool = True,
+    allow_empty: bool = False,
 ) -> Iterator[Service]:
     """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
     robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
 
     Places and edges added over the bus are used ``refresh_settle_s`` after the last change;
-    ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). On exit a running
+    ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). ``allow_empty``:
+    serve a map without places (else :class:`mapdb.errors.EmptyMapError`). On exit a running
     localization is ended (at its next capture or move), then everything is undeclared and the
     session closed (an unclosed session keeps the process alive).
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
-    loaded = load_map(db_path, localizer_config.detector)
-    localizer = Localizer(loaded, localizer_config)
+    localizer = None
+    if not (allow_empty and _has_no_places(db_path)):
+        localizer = Localizer(load_map(db_path, localizer_config.detector), localizer_config)
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
@@ -187,8 +194,9 @@ def start_service(
         )  # fmt: skip
         stack.callback(remote.close)
         runner = LocalizationRunner(
-            localizer, remote, policy, max_pending=limits.max_pending_localizations
-        )
+            localizer, remote, policy, max_pending=limits.max_pending_localizations,
+            localizer_config=localizer_config,
+        )  # fmt: skip
         node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
         runner.publish = node.publish
         stack.callback(runner.stop)
@@ -204,3 +212,8 @@ def start_service(
             )
         )  # fmt: skip
         yield Service(session, config, runner, localizer, refresher)
+
+
+def _has_no_places(db_path: Path) -> bool:
+    with open_for_reading(db_path) as map_db:
+        return not map_db.places()

@@ -21,7 +21,7 @@ from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient, check_belief
-from toploc.runner import LocalizationRunner
+from toploc.runner import LocalizationRunner, NoPlacesYetError
 from toploc.service import start_service
 
 CAMERA = PanoramaCamera(512, 96)
@@ -108,3 +108,20 @@ def test_the_demo_runs_end_to_end_on_a_cached_map(building_map, tmp_path, monkey
     assert result.exit_code == 0, result.output
     assert "3/3 client: localize, active" in result.output
     assert "the robot was kidnapped into office_b" in result.output
+
+
+def test_a_runner_on_a_map_without_places_waits_for_the_first_ones(loaded):
+    runner = LocalizationRunner(None, robot_in("kitchen", 2.0, 3.0))
+    for call in (runner.belief, lambda: runner.localize(False), lambda: runner.reset(None)):
+        with pytest.raises(NoPlacesYetError, match="the map has no places yet"):
+            call()
+    assert runner.replace_map(loaded)
+    assert set(runner.belief()["rooms"]) == set(loaded.rooms)
+    assert runner.localize(active=False)["best_place"]["room"] == "kitchen"
+
+
+def test_serve_refuses_a_missing_map_unless_asked_to_create_it(tmp_path):
+    missing = tmp_path / "new.db"
+    result = CliRunner().invoke(main, ["serve", "--db", str(missing), "--robot-id", "n1"])
+    assert result.exit_code == 2 and "--new-map creates it empty" in result.output
+    assert not missing.exists()

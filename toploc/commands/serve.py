@@ -15,6 +15,7 @@ from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
 from localizer.robot_protocol import Camera
+from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError, open_source
 from robot.p2os_base import P2osError
@@ -29,7 +30,8 @@ from toploc.commands.options import (
 )
 from toploc.limits import Limits, load_limits
 from toploc.maps import ensure_world_map
-from toploc.robots import ROBOT_SPECS, open_robot, parse_robot_spec
+from toploc.nodes.sim_truth import subscribe_true_pose
+from toploc.robots import ROBOT_SPECS, open_robot, parse_robot_spec, true_pose_camera
 from toploc.service import start_service
 
 
@@ -45,9 +47,15 @@ def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) 
 @click.option(
     "--db",
     "db_path",
-    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="The map (default: the --sim-world's map from the cache, made on first use).",
+    help="The map (default: the --sim-world's map from the cache, made on first use); it may "
+    "have no places yet (record them with toploc map record).",
+)
+@click.option(
+    "--new-map",
+    is_flag=True,
+    help="Create the --db file as an empty map if it does not exist.",
 )
 @robot_id_option
 @click.option(
@@ -106,12 +114,13 @@ def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) 
         "Where camera/capture takes panoramas: sim (the simulated robot's renderer), uvc:N or "
         "uvc:VIDEO[,layout=dual-fisheye] (a 360° webcam), files:DIR (the next image of a "
         "folder), ptu:DIR[,step_deg=S,focal_px=F] (a pan sweep stitched), or "
-        "omni:CX,CY,R0,R1[:DEVICE|FILE] (a mirror camera, unwrapped). The base stays the "
-        "simulated robot's."
+        "omni:CX,CY,R0,R1[:DEVICE|FILE] (a mirror camera, unwrapped). With --robot p2os:PORT, "
+        "sim renders at the true pose a toploc sim p2os --bus publishes (simulation only)."
     ),
 )
 def serve(
     db_path: Path | None,
+    new_map: bool,
     robot_id: str,
     listen: tuple[str, ...],
     connect: tuple[str, ...],
@@ -136,6 +145,7 @@ def serve(
         config = bus_config(robot_id, zenoh_file, mode, listen or None, connect or None)
     except ValueError as error:
         raise click.ClickException(str(error)) from None
+    db_path = _map_path(db_path, new_map)
     click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
     warn_if_exposed(config)
     if no_sim and source != "sim":
@@ -154,6 +164,24 @@ def serve(
         _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, robot_spec, camera,
                limits, source, capture_from)  # fmt: skip
     click.echo("stopped")
+
+
+def _map_path(db_path: Path | None, new_map: bool) -> Path | None:
+    """``--db``, created empty with ``--new-map``; a missing one is an error."""
+    if db_path is None:
+        if new_map:
+            raise click.UsageError("--new-map needs --db FILE")
+        return None
+    if not db_path.exists():
+        if not new_map:
+            raise click.BadParameter(
+                f"map {db_path} does not exist (--new-map creates it empty)", param_hint="--db"
+            )
+        try:
+            MapDatabase.open(db_path, create=True).close()
+        except MapDatabaseError as error:
+            raise click.ClickException(str(error)) from error
+    return db_path
 
 
 def _serve(
@@ -179,10 +207,20 @@ def _serve(
     spec = None if no_sim else robot_spec
     try:
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
+        base_camera, true_pose = None, None
+        if spec is not None and parse_robot_spec(spec)[0] == "p2os" and source == "sim":
+            base_camera, true_pose = true_pose_camera(sim_world, robot_id, db, seed)
         with (
-            open_robot(spec, sim_world, sim_room, seed, db) as (robot, where),
-            start_service(db, config, robot, policy, localizer_config, limits, capture_from),
-        ):
+            open_robot(spec, sim_world, sim_room, seed, db, base_camera) as (robot, where),
+            start_service(
+                db, config, robot, policy, localizer_config, limits, capture_from,
+                allow_empty=db_path is not None,
+            ) as service,
+            ExitStack() as stack,
+        ):  # fmt: skip
+            if true_pose is not None:
+                stack.callback(subscribe_true_pose(service.session, true_pose).undeclare)
+                where += f", its camera at the true pose on toploc/{robot_id}/sim/true_pose"
             click.echo(
                 f"serving {db} as toploc/{robot_id}/** ({config.mode}, listen "
                 f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}; "

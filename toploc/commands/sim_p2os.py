@@ -1,12 +1,16 @@
 """``toploc sim p2os``: a simulated Pioneer base speaking P2OS/ARCOS on a pseudo-terminal, for
 trying the serial path without a robot (issue 12). Prints the port to connect to, runs until
-Ctrl-C or SIGTERM.
+Ctrl-C or SIGTERM. With ``--bus`` it also publishes its true pose and serves ``sim/kidnap`` on
+the Zenoh bus (simulation only, :mod:`toploc.nodes.sim_truth`), so that ``toploc serve --robot
+p2os:PORT --source sim`` in another process renders its camera where the base really is.
 """
 
 from __future__ import annotations
 
 import signal
 import threading
+from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -15,6 +19,9 @@ import numpy as np
 from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
+from toploc.bus_config import client_bus_config
+from toploc.commands.options import robot_id_option, zenoh_config_option
+from toploc.nodes.sim_truth import SimTruthNode, open_when_up
 
 FAULTS = ("garbage", "truncated", "checksum", "mute")
 
@@ -49,6 +56,20 @@ def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
 )
 @click.option("--fault-every", type=click.IntRange(min=1), default=10, show_default=True)
 @click.option("--time-scale", type=click.FloatRange(min=0.1, max=20), default=1.0)
+@click.option(
+    "--bus",
+    "on_bus",
+    is_flag=True,
+    help="Also publish the true pose (sim/true_pose) and serve sim/kidnap on the Zenoh bus, "
+    "for a service's sim camera (toploc serve --robot p2os:PORT --source sim). Simulation only.",
+)
+@robot_id_option
+@click.option(
+    "--connect",
+    multiple=True,
+    help="With --bus: the Zenoh endpoint of the service (repeatable; default tcp/127.0.0.1:7447).",
+)
+@zenoh_config_option
 def p2os(
     world: str,
     room: str,
@@ -57,6 +78,10 @@ def p2os(
     faults: tuple[str, ...],
     fault_every: int,
     time_scale: float,
+    on_bus: bool,
+    robot_id: str,
+    connect: tuple[str, ...],
+    zenoh_file: Path | None,
 ) -> None:
     """Run a simulated Pioneer base on a pseudo-terminal until interrupted."""
     built = make_world(world)
@@ -70,11 +95,26 @@ def p2os(
     sim = P2osSimulator(
         built, pose, time_scale=time_scale, link=link, faults=simulator_faults(faults, fault_every)
     )
-    with sim:
+    with ExitStack() as stack:
+        stack.enter_context(sim)
         click.echo(f"port: {sim.port}")
         click.echo(
             f"a simulated Pioneer in {world}/{room} at ({pose.x_m:.2f}, {pose.y_m:.2f}) m; "
             f"connect with: toploc serve --robot p2os:{sim.port}. Ctrl-C stops."
         )
+        if on_bus:
+            try:
+                # a Zenoh client: the service routes its other clients' queries to it (peers
+                # that listen nowhere do not reach each other through a third)
+                config = client_bus_config(robot_id, zenoh_file, connect or None)
+                config = replace(config, mode="client")
+            except ValueError as error:
+                raise click.ClickException(str(error)) from None
+            click.echo(f"waiting for the service at {', '.join(config.connect)} ...")
+            session = open_when_up(config, stop)
+            if session is not None:
+                stack.enter_context(session)
+                stack.enter_context(SimTruthNode(session, robot_id, sim, seed=seed))
+                click.echo(f"true pose on toploc/{robot_id}/sim/true_pose (simulation only)")
         stop.wait()
     click.echo("stopped")

@@ -45,6 +45,7 @@ import zenoh
 from localizer.belief import RoomBelief
 from toploc import bus
 from toploc.limits import Limits
+from toploc.runner import NoPlacesYetError
 
 NODE_NAME = "localizer"
 _log = logging.getLogger(__name__)
@@ -175,7 +176,7 @@ class LocalizerNode:
         _log.warning("robot node %s", "gone: the belief is stale" if gone else "back")
         try:
             self.publish(self.service.belief())
-        except (bus.BusError, zenoh.ZError) as error:
+        except (bus.BusError, zenoh.ZError, NoPlacesYetError) as error:
             _log.warning("could not publish the belief: %s", error)
 
     def _marked(self, belief: Mapping[str, Any]) -> dict[str, Any]:
