@@ -77,6 +77,9 @@ MAP_PLACES = "map/places"
 MAP_EDGES = "map/edges"
 MAP_ADD = "map/add"
 MAP_CONNECT = "map/connect"
+HOMING_GOAL = "homing/goal"
+HOMING_CANCEL = "homing/cancel"
+HOMING_PROGRESS = "homing/progress"
 
 _FORBIDDEN_CHUNK_CHARS = set("/*$?#")
 _log = logging.getLogger(__name__)

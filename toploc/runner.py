@@ -10,6 +10,12 @@ A waiting localization whose client has given up (its ``deadline_s`` passed) is 
 it runs, and at most ``max_pending`` wait. ``stop()`` ends a running localization at its next
 capture or move (within about one feature extraction) and refuses new ones: what a service
 does on SIGTERM.
+
+The robot is held by one thing at a time: a localization, or (:meth:`LocalizationRunner.driving`)
+a homing goal of :mod:`toploc.nodes.homing`, which is refused at once while a localization runs
+and makes a localization wait for its turn while it drives; ``stop()`` ends it the same way.
+An active localization drives to its targets with ``home`` when set (the homing node's, so its
+drives publish progress and can be cancelled), else with ``drive_home``.
 """
 
 from __future__ import annotations
@@ -17,13 +23,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.visual_homing import HomingResult
 
 RESET_WAIT_S = 1.0
 _log = logging.getLogger(__name__)
@@ -36,6 +44,10 @@ class LocalizationStoppedError(RuntimeError):
 
 class LocalizationDroppedError(TimeoutError):
     """A localization was not run: its client gave up while it waited, or too many wait."""
+
+
+class RobotBusyError(RuntimeError):
+    """The robot is held by a running localization or homing goal."""
 
 
 class StoppableRobot:
@@ -69,7 +81,8 @@ class LocalizationRunner:
     """Localize ``robot`` against ``localizer``'s map on request; publish every new belief.
 
     ``publish`` is called with each belief message (e.g. ``LocalizerNode.publish``); it may be
-    set after construction, since the node needs the runner first.
+    set after construction, since the node needs the runner first; so may ``home`` (how an
+    active localization drives to a place, see the module docstring).
     """
 
     def __init__(
@@ -80,8 +93,10 @@ class LocalizationRunner:
         params: ActiveParams | None = None,
         publish: Callable[[dict[str, Any]], object] | None = None,
         max_pending: int = 8,
+        home: Callable[[int], HomingResult] | None = None,
     ) -> None:
         self.localizer = localizer
+        self.home = home
         self._stopping = threading.Event()
         self.robot = StoppableRobot(robot, self._stopping)
         self.max_pending = max_pending
@@ -148,7 +163,12 @@ class LocalizationRunner:
         try:
             if active:
                 result = localize_actively(
-                    self.localizer, self.robot, self.policy, self.params, on_belief=self._set
+                    self.localizer,
+                    self.robot,
+                    self.policy,
+                    self.params,
+                    on_belief=self._set,
+                    home=self.home,
                 )
                 belief = result.final
             else:
@@ -156,6 +176,21 @@ class LocalizationRunner:
                 belief = self.localizer.update(observation)
             self._set(belief)
             return self.belief()
+        finally:
+            self._run_lock.release()
+
+    @contextmanager
+    def driving(self) -> Iterator[StoppableRobot]:
+        """Hold the robot for something else than a localization (a homing goal) and yield it:
+        at once, or :class:`RobotBusyError` while a localization (or another holder) runs;
+        :class:`LocalizationStoppedError` after :meth:`stop`, whose robot raises it at the next
+        capture or move as during a localization."""
+        if not self._run_lock.acquire(blocking=False):
+            raise RobotBusyError("busy: a localization is running; try again when it has ended")
+        try:
+            if self._stopping.is_set():
+                raise LocalizationStoppedError("the service is stopping")
+            yield self.robot
         finally:
             self._run_lock.release()
 
