@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from bus_helpers import wait_for
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
@@ -71,7 +71,7 @@ class SlowRobot:
 
 @contextmanager
 def homing_service(
-    db_path: Path, robot: object
+    db_path: Path, robot: Robot
 ) -> Iterator[tuple[Service, HomingClient, list[dict]]]:
     """The service with ``robot``, a client session, and the progress messages it receives."""
     endpoint = free_endpoint()
@@ -79,7 +79,7 @@ def homing_service(
     client_config = BusConfig(robot_id=ROBOT_ID, listen=(), connect=(endpoint,))
     progress: list[dict] = []
     with (
-        start_service(db_path, service_config, robot, recalibrate=False) as service,  # type: ignore[arg-type]
+        start_service(db_path, service_config, robot, recalibrate=False) as service,
         open_session(client_config) as session,
     ):
         client = HomingClient(session, ROBOT_ID, timeout_s=5.0)
@@ -197,3 +197,20 @@ def test_active_localization_drives_through_the_homing_node(building_map):
     assert progress and {m["state"] for m in progress} & {"homing", "lost"}
     driven = sum(m["moved_m"] for m in progress if m["state"] not in ("homing", "lost"))
     assert driven == pytest.approx(robot.distance_driven_m, abs=1e-6)
+
+
+def test_a_cancel_during_active_localization_ends_its_driving(building_map):
+    kidnapped = SimulatedRobot.kidnapped(make_world("building"), "office_b", seed=4, camera=CAMERA)
+    robot = SlowRobot(kidnapped, move_s=2.0)
+    with homing_service(building_map[0], robot) as (_, client, progress):
+        localizer = LocalizerClient(client.session, ROBOT_ID, timeout_s=5.0)
+        beliefs: list[dict] = []
+        worker = threading.Thread(target=lambda: beliefs.append(localizer.localize(active=True)))
+        worker.start()
+        assert wait_for(lambda: bool(progress), 15.0)
+        assert client.cancel() is True
+        worker.join(10.0)
+        assert wait_for(lambda: progress[-1]["state"] == "cancelled")
+    assert beliefs and beliefs[0]["kind"] == "belief"  # it looked where the robot stopped
+    assert [m["state"] for m in progress].count("cancelled") == 1
+    assert kidnapped.distance_driven_m < 1.0  # one move at most: no further drive
