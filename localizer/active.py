@@ -2,7 +2,9 @@
 place by visual homing, look again there, and update the belief.
 
 Works with any :class:`localizer.robot_protocol.Robot`; the policy that picks where to go is
-pluggable (:mod:`localizer.policy`).
+pluggable (:mod:`localizer.policy`), and so is how the robot gets to a place (``home``: by
+default :func:`~localizer.visual_homing.drive_home`; the service passes its homing node's, so
+that a drive publishes progress and can be cancelled).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from mapdb.records import Place
 
 # A short homing move rarely leaves the room: keep most of the mass where it is.
 HOMING_STAY_PROBABILITY = 0.98
+CANCELLED = "cancelled"
+"""The :attr:`HomingResult.reason` of a drive someone cancelled: no further drive follows."""
 
 
 @dataclass(frozen=True)
@@ -75,17 +79,26 @@ def localize_actively(
     policy: Policy | str = "separating",
     params: ActiveParams | None = None,
     on_belief: Callable[[RoomBelief], None] | None = None,
+    home: Callable[[int], HomingResult] | None = None,
 ) -> ActiveResult:
     """Localize from a uniform belief, driving to disambiguate while the belief is ambiguous.
 
     ``policy``: a :class:`~localizer.policy.Policy` or the name of one in
     :data:`localizer.policy.POLICIES`; its context offers the localizer's stored-view
     similarity, computed only where the policy asks. ``on_belief`` is called with each new
-    belief (state ``homing`` while driving).
+    belief (state ``homing`` while driving). ``home(place_id)`` drives the robot to a place
+    (default: :func:`drive_home` toward its stored fingerprint with ``params.homing``); a drive
+    that ends with reason :data:`CANCELLED` is the last: the robot looks once where it stopped.
     """
     chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
     notify = on_belief or (lambda belief: None)
+
+    def drive_to(place_id: int) -> HomingResult:
+        goal = localizer.map.fingerprint(place_id)
+        return drive_home(robot, goal, localizer.extract, params.homing)
+
+    go = home or drive_to
     localizer.reset()
     observation = localizer.observe(robot.capture().image)
     belief = localizer.update(observation)
@@ -106,8 +119,7 @@ def localize_actively(
             break
         context = context.trying(target)
         notify(localizer.belief(LocalizationState.HOMING))
-        goal = localizer.map.fingerprint(target)
-        homing = drive_home(robot, goal, localizer.extract, params.homing)
+        homing = go(target)
         frames += len(homing.lengths) + 1
         distance += homing.distance_m
         localizer.predict(HOMING_STAY_PROBABILITY)
@@ -115,4 +127,6 @@ def localize_actively(
         belief = localizer.update(observation)
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
+        if homing.reason == CANCELLED:
+            break
     return ActiveResult(first, belief, tuple(visits), frames, distance)

@@ -29,6 +29,8 @@ shortest step). A bump triggers a sidestep (turn by +-90 degrees, alternating, a
 ``sidestep_m``); ``max_bumps`` homing moves in a row ending in a bump stop the run with reason
 ``"blocked"``. A view with too few features or matches triggers a recovery move (turn by 120
 degrees and drive ``sidestep_m``); ``max_lost`` such views in a row stop it with ``"lost"``.
+An optional ``on_step`` is told of each capture (:class:`HomingProgress`) before the loop acts
+on it, e.g. to publish progress; the loop itself stays the same.
 """
 
 from __future__ import annotations
@@ -229,6 +231,20 @@ class HomingResult:
     lengths: tuple[float, ...] = ()
 
 
+@dataclass(frozen=True)
+class HomingProgress:
+    """What :func:`drive_home` knows after one capture: ``steps`` moves made and
+    ``distance_m`` driven (odometric) so far, the current ``view`` and its ``home`` step, None
+    when the view had too few features or matches (a recovery move
+    follows). There is no metric distance to the goal: the ALV length and, for "best", the
+    parallax shrink toward it, but a bearing-only view has no scale."""
+
+    steps: int
+    distance_m: float
+    view: Fingerprint
+    home: HomeStep | None
+
+
 def grey_extractor(preset: str = "sift") -> Callable[[np.ndarray], Fingerprint]:
     """An ``extract`` for :func:`drive_home`: BGR or grey uint8 panorama -> fingerprint."""
 
@@ -252,13 +268,16 @@ def drive_home(
     goal: Fingerprint,
     extract: Callable[[np.ndarray], Fingerprint],
     params: HomingParams | None = None,
+    on_step: Callable[[HomingProgress], None] | None = None,
 ) -> HomingResult:
     """Drive ``robot`` by visual homing until the images say it reached ``goal``.
 
     ``extract`` must use the goal's detector and settings. See the module docstring for the
-    step length, the arrival test and what happens on a bump.
+    step length, the arrival test and what happens on a bump. ``on_step`` is called after each
+    capture with the :class:`HomingProgress` so far (an exception it raises ends the run).
     """
     p = params or HomingParams()
+    notify = on_step or (lambda progress: None)
     steps, distance, bumps, lost, scale = 0, 0.0, 0, 0, 1.0
     previous_goal_dir: float | None = None
     lengths: list[float] = []
@@ -277,6 +296,7 @@ def drive_home(
         try:
             step = home_step(current, goal, p.step)
         except HomingError:
+            notify(HomingProgress(steps, distance, current, None))
             lost += 1
             if lost > p.max_lost or steps >= p.max_steps:
                 return done(False, "lost", current)
@@ -284,6 +304,7 @@ def drive_home(
             previous_goal_dir = None
             continue
         lost = 0
+        notify(HomingProgress(steps, distance, current, step))
         lengths.append(step.length)
         if _arrived(step, p):
             return done(True, "arrived", current)

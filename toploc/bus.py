@@ -81,6 +81,9 @@ SIM_TRUE_POSE = "sim/true_pose"
 """Simulation only: the simulated base's true pose (:mod:`toploc.nodes.sim_truth`)."""
 SIM_KIDNAP = "sim/kidnap"
 """Simulation only: carry the simulated base into a room (:mod:`toploc.nodes.sim_truth`)."""
+HOMING_GOAL = "homing/goal"
+HOMING_CANCEL = "homing/cancel"
+HOMING_PROGRESS = "homing/progress"
 
 _FORBIDDEN_CHUNK_CHARS = set("/*$?#")
 _log = logging.getLogger(__name__)

@@ -14,6 +14,12 @@ does on SIGTERM.
 A service may start on a map without places (a user about to record one): the runner then has
 no localizer, and ``belief``, ``localize`` and ``reset`` raise :class:`NoPlacesYetError` until
 the first :meth:`LocalizationRunner.replace_map` brings places.
+
+The robot is held by one thing at a time: a localization, or (:meth:`LocalizationRunner.driving`)
+a homing goal of :mod:`toploc.nodes.homing`, which is refused at once while a localization runs
+and makes a localization wait for its turn while it drives; ``stop()`` ends it the same way.
+An active localization drives to its targets with ``home`` when set (the homing node's, so its
+drives publish progress and can be cancelled), else with ``drive_home``.
 """
 
 from __future__ import annotations
@@ -21,13 +27,15 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.visual_homing import HomingResult
 
 RESET_WAIT_S = 1.0
 _log = logging.getLogger(__name__)
@@ -47,6 +55,10 @@ NO_PLACES_YET = "the map has no places yet: record some first (toploc map record
 
 class LocalizationDroppedError(TimeoutError):
     """A localization was not run: its client gave up while it waited, or too many wait."""
+
+
+class RobotBusyError(RuntimeError):
+    """The robot is held by a running localization or homing goal."""
 
 
 class StoppableRobot:
@@ -80,8 +92,9 @@ class LocalizationRunner:
     """Localize ``robot`` against ``localizer``'s map on request; publish every new belief.
 
     ``publish`` is called with each belief message (e.g. ``LocalizerNode.publish``); it may be
-    set after construction, since the node needs the runner first. ``localizer`` None: the map
-    has no places yet; the first :meth:`replace_map` makes one with ``localizer_config``.
+    set after construction, since the node needs the runner first; so may ``home`` (how an
+    active localization drives to a place, see the module docstring). ``localizer`` None: the
+    map has no places yet; the first :meth:`replace_map` makes one with ``localizer_config``.
     """
 
     def __init__(
@@ -93,9 +106,11 @@ class LocalizationRunner:
         publish: Callable[[dict[str, Any]], object] | None = None,
         max_pending: int = 8,
         localizer_config: LocalizerConfig | None = None,
+        home: Callable[[int], HomingResult] | None = None,
     ) -> None:
         self._localizer = localizer
         self.localizer_config = localizer_config
+        self.home = home
         self._stopping = threading.Event()
         self.robot = StoppableRobot(robot, self._stopping)
         self.max_pending = max_pending
@@ -174,7 +189,12 @@ class LocalizationRunner:
             localizer = self.localizer  # replaced while this one waited
             if active:
                 result = localize_actively(
-                    localizer, self.robot, self.policy, self.params, on_belief=self._set
+                    localizer,
+                    self.robot,
+                    self.policy,
+                    self.params,
+                    on_belief=self._set,
+                    home=self.home,
                 )
                 belief = result.final
             else:
@@ -182,6 +202,21 @@ class LocalizationRunner:
                 belief = localizer.update(observation)
             self._set(belief)
             return self.belief()
+        finally:
+            self._run_lock.release()
+
+    @contextmanager
+    def driving(self) -> Iterator[StoppableRobot]:
+        """Hold the robot for something else than a localization (a homing goal) and yield it:
+        at once, or :class:`RobotBusyError` while a localization (or another holder) runs;
+        :class:`LocalizationStoppedError` after :meth:`stop`, whose robot raises it at the next
+        capture or move as during a localization."""
+        if not self._run_lock.acquire(blocking=False):
+            raise RobotBusyError("busy: a localization is running; try again when it has ended")
+        try:
+            if self._stopping.is_set():
+                raise LocalizationStoppedError("the service is stopping")
+            yield self.robot
         finally:
             self._run_lock.release()
 

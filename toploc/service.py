@@ -1,6 +1,7 @@
 """Running toploc as a service: the nodes of one robot on one Zenoh session.
 
-:func:`start_service` opens the session and declares the map node, the localizer node and,
+:func:`start_service` opens the session and declares the map node, the localizer node, the
+homing node (:mod:`toploc.nodes.homing`; the active localizer drives through it) and,
 when a robot object is given (the simulated robot here), its robot node. The localizer always
 drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base
 running its own robot node elsewhere is used the same way.
@@ -36,6 +37,7 @@ from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
 from toploc.maps import calibrate_map, load_map
+from toploc.nodes.homing import HomingNode, HomingService
 from toploc.nodes.localizer import LocalizerNode
 from toploc.nodes.mapdb import MapNode
 from toploc.nodes.robot import RemoteRobot, RobotNode
@@ -154,6 +156,7 @@ class Service:
     runner: LocalizationRunner
     localizer: Localizer | None
     refresher: MapRefresher
+    homing: HomingService | None = None
 
 
 @contextmanager
@@ -199,7 +202,10 @@ def start_service(
         )  # fmt: skip
         node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
         runner.publish = node.publish
-        stack.callback(runner.stop)
+        homing = HomingService(runner)  # homing/*; also how an active localization drives
+        homing.publish = stack.enter_context(HomingNode(session, robot_id, homing, limits)).publish
+        runner.home = homing.home
+        stack.callback(runner.stop)  # on exit, before the nodes above close: a run ends
         refresher = MapRefresher(
             db_path, runner, localizer_config.detector, refresh_settle_s, recalibrate
         )
@@ -211,7 +217,7 @@ def start_service(
                 on_change=refresher.changed,
             )
         )  # fmt: skip
-        yield Service(session, config, runner, localizer, refresher)
+        yield Service(session, config, runner, localizer, refresher, homing)
 
 
 def _has_no_places(db_path: Path) -> bool:

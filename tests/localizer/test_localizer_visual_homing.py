@@ -11,6 +11,7 @@ from homing.alv import HomingError
 from localizer.robot_protocol import Capture, MoveResult, Odometry
 from localizer.visual_homing import (
     HomingParams,
+    HomingProgress,
     StepParams,
     density_peak_rad,
     drive_home,
@@ -195,6 +196,38 @@ def test_drive_home_reaches_home_among_point_landmarks():
     assert result.arrived, result
     assert math.hypot(robot.pose.x_m - home.x_m, robot.pose.y_m - home.y_m) < 0.25
     assert result.steps <= 40 and result.distance_m < 5.0
+
+
+def test_drive_home_reports_each_capture_to_on_step():
+    world = LandmarkWorld(5)
+    home = Pose2D(3.0, 3.0, 1.0)
+    robot = PointRobot(Pose2D(1.5, 4.2, -2.5))
+    seen: list[HomingProgress] = []
+    result = drive_home(
+        robot,
+        world.fingerprint(home),
+        lambda _: world.fingerprint(robot.pose),
+        on_step=seen.append,
+    )
+    assert result.arrived
+    assert [p.home.length for p in seen if p.home is not None] == list(result.lengths)
+    assert [p.steps for p in seen] == sorted(p.steps for p in seen)
+    assert seen[0].steps == 0 and seen[0].distance_m == 0
+    assert seen[-1].steps == result.steps and seen[-1].distance_m == result.distance_m
+    assert seen[-1].view is result.last
+
+
+def test_an_exception_in_on_step_ends_the_drive():
+    world = LandmarkWorld(5)
+    robot = PointRobot(Pose2D(1.5, 4.2, -2.5))
+
+    def refuse(progress: HomingProgress) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        goal = world.fingerprint(Pose2D(3.0, 3.0, 1.0))
+        drive_home(robot, goal, lambda _: world.fingerprint(robot.pose), on_step=refuse)
+    assert robot.pose == Pose2D(1.5, 4.2, -2.5)
 
 
 def test_drive_home_stops_blocked_behind_a_wall():
