@@ -20,7 +20,7 @@ from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus_config import client_bus_config
-from toploc.commands.options import robot_id_option, zenoh_config_option
+from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 from toploc.nodes.sim_truth import SimTruthNode, open_when_up
 
 FAULTS = ("garbage", "truncated", "checksum", "mute")
@@ -64,11 +64,7 @@ def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
     "for a service's sim camera (toploc serve --robot p2os:PORT --source sim). Simulation only.",
 )
 @robot_id_option
-@click.option(
-    "--connect",
-    multiple=True,
-    help="With --bus: the Zenoh endpoint of the service (repeatable; default tcp/127.0.0.1:7447).",
-)
+@service_endpoint_option
 @zenoh_config_option
 def p2os(
     world: str,
@@ -80,7 +76,7 @@ def p2os(
     time_scale: float,
     on_bus: bool,
     robot_id: str,
-    connect: tuple[str, ...],
+    endpoints: tuple[str, ...],
     zenoh_file: Path | None,
 ) -> None:
     """Run a simulated Pioneer base on a pseudo-terminal until interrupted."""
@@ -106,7 +102,7 @@ def p2os(
             try:
                 # a Zenoh client: the service routes its other clients' queries to it (peers
                 # that listen nowhere do not reach each other through a third)
-                config = client_bus_config(robot_id, zenoh_file, connect or None)
+                config = client_bus_config(robot_id, zenoh_file, endpoints or None)
                 config = replace(config, mode="client")
             except ValueError as error:
                 raise click.ClickException(str(error)) from None
