@@ -18,6 +18,11 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
+def free_endpoint() -> str:
+    """A Zenoh TCP endpoint on a free 127.0.0.1 port."""
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
 def wait_for(predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

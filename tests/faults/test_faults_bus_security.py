@@ -7,14 +7,14 @@ dictionary of this test's; users: ``operator`` (may command), ``viewer`` (logged
 
 import json
 import re
-import socket
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 import zenoh
+from bus_helpers import free_endpoint, wait_for
 from click.testing import CliRunner
 
 from localizer.belief import LocalizationState, RoomBelief
@@ -31,21 +31,6 @@ from toploc.service import start_service
 README = Path(__file__).resolve().parents[2] / "README.md"
 PASSWORDS = {"operator": "change-me", "viewer": "viewer-secret", "robot-node": "node-secret"}
 ROBOT_ID = "r1"
-
-
-def free_endpoint() -> str:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
-
-
-def wait_for(predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def readme_json5_blocks() -> list[str]:

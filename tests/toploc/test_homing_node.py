@@ -5,7 +5,6 @@ driving through the same node."""
 from __future__ import annotations
 
 import math
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -13,7 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from bus_helpers import wait_for
+from bus_helpers import free_endpoint, wait_for
 
 from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
 from robot.render import PanoramaCamera
@@ -29,12 +28,6 @@ from toploc.service import Service, start_service
 CAMERA = PanoramaCamera(512, 96)
 KITCHEN_PLACE = 17  # kitchen (2.25, 0.75) in the building map of tests/conftest.py
 ROBOT_ID = "h1"
-
-
-def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def near_kitchen_place() -> SimulatedRobot:

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from bus_helpers import free_endpoint
 
 from mapdb.database import MapDatabase
 from mapdb.errors import ReadOnlyDatabaseError
@@ -31,12 +32,6 @@ from toploc.service import Service, start_service
 ROBOT_ID = "rmap"
 CAMERA = PanoramaCamera(512, 96)
 MAX_IMAGE_BYTES = 200_000
-
-
-def free_endpoint() -> str:
-    from bus_helpers import free_port
-
-    return f"tcp/127.0.0.1:{free_port()}"
 
 
 def robot_in(room: str, x_m: float, y_m: float, heading_deg: float = 30.0) -> SimulatedRobot:

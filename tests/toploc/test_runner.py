@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import math
 import shutil
-import socket
 import threading
 
 import pytest
+from bus_helpers import free_endpoint
 from click.testing import CliRunner
 from robot_helpers import RobotWrapper
 
@@ -25,12 +25,6 @@ from toploc.runner import LocalizationRunner, NoPlacesYetError
 from toploc.service import start_service
 
 CAMERA = PanoramaCamera(512, 96)
-
-
-def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def robot_in(room: str, x_m: float, y_m: float) -> SimulatedRobot:
