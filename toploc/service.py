@@ -105,6 +105,11 @@ class MapRefresher:
         self._wake.set()
         self._thread.join(wait_s)
 
+    @property
+    def running(self) -> bool:
+        """Whether its thread still runs (after :meth:`close`: a calibration finishing)."""
+        return self._thread.is_alive()
+
     def _settled(self) -> int | None:
         """Wait for ``settle_s`` without a change; the number of changes then (None: stop)."""
         while True:

@@ -34,12 +34,14 @@ from toploc.commands.options import (
     node_setup,
     open_capture_source,
     stop_on_signals,
+    stopped,
 )
 from toploc.limits import Limits
 from toploc.maps import ensure_world_map
 from toploc.nodes.sim_truth import subscribe_true_pose
 from toploc.robots import ROBOT_SPECS, open_served_robot
 from toploc.service import (
+    MapRefresher,
     enter_camera_node,
     enter_localizer_nodes,
     enter_map_node,
@@ -207,15 +209,16 @@ def localizer_node(
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
 
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
-        enter_localizer_nodes(
+        refresher.append(enter_localizer_nodes(
             stack, session, robot_id, db, policy, localizer_config, limits,
             allow_empty=True,
-        )  # fmt: skip
+        ).refresher)  # fmt: skip
         return f"{db} (reloaded on map/changed), driving the bus's robot node"
 
+    refresher: list[MapRefresher] = []
     with ExitStack() as stack:
         _run(config, limits, "localizer and homing nodes: ", enter, stack)
-    click.echo("stopped")
+    stopped(refresher[0] if refresher else None)
 
 
 @node_group.command("map")

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -14,11 +16,12 @@ from localizer.cameras import parse_camera
 from localizer.robot_protocol import Camera
 from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
-from robot.camera_sources import CameraError, open_source
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
 from toploc.bus_config import bus_config, exposure_warning
 from toploc.limits import Limits, load_limits
-from toploc.robots import parse_robot_spec
+
+if TYPE_CHECKING:
+    from toploc.service import MapRefresher
 
 
 def _check_camera(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
@@ -170,6 +173,8 @@ def describe_bus(config: BusConfig) -> str:
 
 
 def check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
+    from toploc.robots import parse_robot_spec  # only the commands that run a robot load it
+
     try:
         parse_robot_spec(value)
     except ValueError as error:
@@ -198,6 +203,8 @@ def map_path(db_path: Path | None, new_map: bool) -> Path | None:
 def open_capture_source(stack: ExitStack, source: str) -> Camera | None:
     """The camera of ``--source`` (None for ``sim``: the robot's own), closed by ``stack``;
     a source that cannot be opened is a one-line error."""
+    from robot.camera_sources import CameraError, open_source
+
     if source == "sim":
         return None
     try:
@@ -206,3 +213,14 @@ def open_capture_source(stack: ExitStack, source: str) -> Camera | None:
         raise click.ClickException(f"--source: {error}") from None
     stack.callback(getattr(camera, "close", lambda: None))
     return camera
+
+
+def stopped(refresher: MapRefresher | None) -> None:
+    """Print ``stopped``; if a map calibration still runs in ``refresher``'s thread, end the
+    process now (an interpreter exiting under a native OpenCV call aborts): the map keeps
+    the likelihood it had, as SQLite writes a calibration in one transaction."""
+    click.echo("stopped")
+    if refresher is not None and refresher.running:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)

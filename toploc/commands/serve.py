@@ -26,12 +26,13 @@ from toploc.commands.options import (
     node_setup,
     open_capture_source,
     stop_on_signals,
+    stopped,
 )
 from toploc.limits import Limits
 from toploc.maps import ensure_world_map
 from toploc.nodes.sim_truth import subscribe_true_pose
 from toploc.robots import ROBOT_SPECS, open_served_robot
-from toploc.service import start_service
+from toploc.service import MapRefresher, start_service
 
 
 @click.command("serve")
@@ -112,9 +113,9 @@ def serve(
         )
     with ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
-        _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, robot_spec, camera,
-               limits, source, capture_from)  # fmt: skip
-    click.echo("stopped")
+        refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
+                           robot_spec, camera, limits, source, capture_from)  # fmt: skip
+    stopped(refresher)
 
 
 def _serve(
@@ -130,8 +131,8 @@ def _serve(
     limits: Limits,
     source: str,
     capture_from: Camera | None,
-) -> None:
-    """Run the service until SIGINT or SIGTERM."""
+) -> MapRefresher:
+    """Run the service until SIGINT or SIGTERM; its map refresher."""
     db = db_path or ensure_world_map(sim_world)
     stop = stop_on_signals()
     spec = None if no_sim else robot_spec
@@ -155,5 +156,6 @@ def _serve(
                 "Ctrl-C stops."
             )
             stop.wait()
+        return service.refresher
     except (BusError, MapDatabaseError, P2osError) as error:  # one line naming what failed
         raise click.ClickException(str(error)) from error
