@@ -5,7 +5,7 @@ Errors: a command reports what the user can fix as ``Error: <message>`` (a
 ``Error: <type>: <message> (run with --debug for the traceback)``, exit status 1; ``toploc
 --debug <command>`` lets it through with its traceback. SIGTERM is handled like Ctrl-C
 (``KeyboardInterrupt``: cleanup runs, exit status 130), unless a command installs its own
-handler (``serve`` does).
+handler (``serve`` and ``node`` do).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from toploc.commands.demo import demo
 from toploc.commands.eval import eval_group
 from toploc.commands.localize import localize
 from toploc.commands.map import map_group
+from toploc.commands.node import node_group
 from toploc.commands.serve import serve
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
@@ -85,3 +86,4 @@ main.add_command(belief)
 main.add_command(localize)
 main.add_command(demo)
 main.add_command(serve)
+main.add_command(node_group)

@@ -93,3 +93,23 @@ def open_robot(
             seed=seed,
         )
         yield BaseWithCamera(base, camera), f"{world}/{room} over P2OS on {sim.port}"
+
+
+@contextmanager
+def open_served_robot(
+    spec: str | None,
+    source: str,
+    world: str,
+    room: str,
+    seed: int,
+    db_path: Path,
+    robot_id: str,
+) -> Iterator[tuple[Robot | None, str, TruePose | None]]:
+    """:func:`open_robot` as ``serve`` and ``node robot`` run it: ``(robot, description,
+    true_pose)``; a ``p2os:PORT`` base with ``source`` ``sim`` gets the :func:`true_pose_camera`
+    (feed ``true_pose`` from the bus), any other base its own camera."""
+    base_camera, true_pose = None, None
+    if spec is not None and parse_robot_spec(spec)[0] == "p2os" and source == "sim":
+        base_camera, true_pose = true_pose_camera(world, robot_id, db_path, seed)
+    with open_robot(spec, world, room, seed, db_path, base_camera) as (robot, where):
+        yield robot, where, true_pose

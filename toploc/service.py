@@ -6,11 +6,15 @@ when a robot object is given (the simulated robot here), its robot node. The loc
 drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base
 running its own robot node elsewhere is used the same way.
 
-A map that grows over the bus (``map/add``, ``map/connect``) is picked up without a restart by
-:class:`MapRefresher`: once no change came for ``settle_s`` seconds it re-reads the map and swaps
-it into the localizer between two localizations (the next one uses the new places), then, if
-asked, re-calibrates the likelihood on the grown map (about 20 s per detector here) and swaps
-the map in again with it.
+Each node role has its ``enter_*`` function (robot, camera, localizer with homing, map), which
+enters the node into an :class:`~contextlib.ExitStack`: ``toploc serve`` enters several on one
+session, ``toploc node ROLE`` one per process (:mod:`toploc.commands.node`).
+
+A map that grows over the bus (``map/add``, ``map/connect``: the map node publishes
+``map/changed``) is picked up without a restart by :class:`MapRefresher`: once no change came
+for ``settle_s`` seconds it re-reads the map and swaps it into the localizer between two
+localizations (the next one uses the new places), then, if asked, re-calibrates the likelihood
+on the grown map (about 20 s per detector here) and swaps the map in again with it.
 
 With ``allow_empty`` a map without places is served too (a user about to record one): the
 localizer keys answer "the map has no places yet" until the first places are recorded.
@@ -37,9 +41,10 @@ from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
 from toploc.maps import calibrate_map, load_map
+from toploc.nodes.camera import CameraNode
 from toploc.nodes.homing import HomingNode, HomingService
 from toploc.nodes.localizer import LocalizerNode
-from toploc.nodes.mapdb import MapNode
+from toploc.nodes.mapdb import MapNode, subscribe_changes
 from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.runner import LocalizationRunner
 
@@ -50,11 +55,12 @@ _log = logging.getLogger(__name__)
 class MapRefresher:
     """Reload the map at ``db_path`` into ``runner`` after changes settle (a thread of its own).
 
-    :meth:`changed` (the map node calls it after each write) restarts the ``settle_s`` wait; when
-    it ends the map is re-read (``detector``) and swapped in (:meth:`LocalizationRunner.
-    replace_map`); with ``recalibrate``, each detector the map holds (``detector`` first) is
-    then calibrated and the map swapped in again with its new likelihood. A change during the
-    calibration starts another round when it ends. Errors are logged; the old map stays.
+    :meth:`changed` (called for each ``map/changed`` the map node publishes) restarts the
+    ``settle_s`` wait; when it ends the map is re-read (``detector``) and swapped in
+    (:meth:`LocalizationRunner.replace_map`); with ``recalibrate``, each detector the map
+    holds (``detector`` first) is then calibrated and the map swapped in again with its new
+    likelihood. A change during the calibration starts another round when it ends. Errors are
+    logged; the old map stays.
     """
 
     def __init__(
@@ -98,6 +104,11 @@ class MapRefresher:
         self._stop.set()
         self._wake.set()
         self._thread.join(wait_s)
+
+    @property
+    def running(self) -> bool:
+        """Whether its thread still runs (after :meth:`close`: a calibration finishing)."""
+        return self._thread.is_alive()
 
     def _settled(self) -> int | None:
         """Wait for ``settle_s`` without a change; the number of changes then (None: stop)."""
@@ -159,6 +170,104 @@ class Service:
     homing: HomingService | None = None
 
 
+@dataclass(frozen=True)
+class LocalizerNodes:
+    """What :func:`enter_localizer_nodes` runs: the runner behind ``localizer/*``, the map as
+    first loaded (None for a map without places), what keeps it fresh, the homing service."""
+
+    runner: LocalizationRunner
+    localizer: Localizer | None
+    refresher: MapRefresher
+    homing: HomingService
+
+
+def enter_robot_node(
+    stack: ExitStack,
+    session: zenoh.Session,
+    robot_id: str,
+    robot: Robot,
+    limits: Limits,
+    camera: Camera | None = None,
+    serve_camera: bool = True,
+) -> RobotNode:
+    """The robot node of ``robot`` (``toploc node robot``), its camera ``camera`` (None: the
+    robot's own; ``serve_camera`` false: none, a camera node serves the captures)."""
+    return stack.enter_context(RobotNode(session, robot_id, robot, limits, camera, serve_camera))
+
+
+def enter_camera_node(
+    stack: ExitStack, session: zenoh.Session, robot_id: str, camera: Camera, limits: Limits
+) -> CameraNode:
+    """A camera node without a base (``toploc node camera``)."""
+    return stack.enter_context(CameraNode(session, robot_id, camera, limits))
+
+
+def enter_localizer_nodes(
+    stack: ExitStack,
+    session: zenoh.Session,
+    robot_id: str,
+    db_path: Path,
+    policy: str = "separating",
+    localizer_config: LocalizerConfig | None = None,
+    limits: Limits | None = None,
+    refresh_settle_s: float = REFRESH_SETTLE_S,
+    recalibrate: bool = True,
+    allow_empty: bool = False,
+) -> LocalizerNodes:
+    """The localizer and homing nodes on the map at ``db_path`` (``toploc node localizer``),
+    driving the bus's robot node (:class:`RemoteRobot`). The map is reloaded after each
+    ``map/changed`` of the robot id's map node, in this process or another (one mechanism for
+    both; the map node publishes it before its reply, and a session delivers its own
+    publications to its subscribers at once). On exit a running localization is ended first.
+    """
+    localizer_config = localizer_config or LocalizerConfig()
+    limits = limits or Limits()
+    localizer = None
+    if not (allow_empty and _has_no_places(db_path)):
+        localizer = Localizer(load_map(db_path, localizer_config.detector), localizer_config)
+    remote = RemoteRobot(
+        session, robot_id, move_timeout_s=limits.move_timeout_s + bus.DEFAULT_TIMEOUT_S,
+        max_image_pixels=limits.max_image_pixels,
+    )  # fmt: skip
+    stack.callback(remote.close)
+    runner = LocalizationRunner(
+        localizer, remote, policy, max_pending=limits.max_pending_localizations,
+        localizer_config=localizer_config,
+    )  # fmt: skip
+    node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
+    runner.publish = node.publish
+    homing = HomingService(runner)  # homing/*; also how an active localization drives
+    homing.publish = stack.enter_context(HomingNode(session, robot_id, homing, limits)).publish
+    runner.home = homing.home
+    stack.callback(runner.stop)  # on exit, before the nodes above close: a run ends
+    refresher = MapRefresher(
+        db_path, runner, localizer_config.detector, refresh_settle_s, recalibrate
+    )
+    stack.callback(refresher.close)
+    stack.callback(subscribe_changes(session, robot_id, refresher.changed).undeclare)
+    return LocalizerNodes(runner, localizer, refresher, homing)
+
+
+def enter_map_node(
+    stack: ExitStack,
+    session: zenoh.Session,
+    robot_id: str,
+    db_path: Path,
+    limits: Limits,
+    localizer_config: LocalizerConfig | None = None,
+    refresh_settle_s: float = REFRESH_SETTLE_S,
+) -> MapNode:
+    """The map node of ``db_path`` (``toploc node map``); ``map/add`` reads panoramas with the
+    localizer's camera model and extracts its detector into an empty map."""
+    localizer_config = localizer_config or LocalizerConfig()
+    return stack.enter_context(
+        MapNode(
+            session, robot_id, db_path, limits, str(localizer_config.camera),
+            detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
+        )
+    )  # fmt: skip
+
+
 @contextmanager
 def start_service(
     db_path: Path,
@@ -179,45 +288,25 @@ def start_service(
     ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). ``allow_empty``:
     serve a map without places (else :class:`mapdb.errors.EmptyMapError`). On exit a running
     localization is ended (at its next capture or move), then everything is undeclared and the
-    session closed (an unclosed session keeps the process alive).
+    session closed (an unclosed session keeps the process alive). The nodes are those of
+    ``toploc node robot``, ``localizer`` and ``map`` (the ``enter_*`` functions), on one session.
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
-    localizer = None
-    if not (allow_empty and _has_no_places(db_path)):
-        localizer = Localizer(load_map(db_path, localizer_config.detector), localizer_config)
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
         if robot is not None:
-            stack.enter_context(RobotNode(session, robot_id, robot, limits, camera))
-        remote = RemoteRobot(
-            session, robot_id, move_timeout_s=limits.move_timeout_s + bus.DEFAULT_TIMEOUT_S,
-            max_image_pixels=limits.max_image_pixels,
+            enter_robot_node(stack, session, robot_id, robot, limits, camera)
+        nodes = enter_localizer_nodes(
+            stack, session, robot_id, db_path, policy, localizer_config, limits,
+            refresh_settle_s, recalibrate, allow_empty,
         )  # fmt: skip
-        stack.callback(remote.close)
-        runner = LocalizationRunner(
-            localizer, remote, policy, max_pending=limits.max_pending_localizations,
-            localizer_config=localizer_config,
-        )  # fmt: skip
-        node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
-        runner.publish = node.publish
-        homing = HomingService(runner)  # homing/*; also how an active localization drives
-        homing.publish = stack.enter_context(HomingNode(session, robot_id, homing, limits)).publish
-        runner.home = homing.home
-        stack.callback(runner.stop)  # on exit, before the nodes above close: a run ends
-        refresher = MapRefresher(
-            db_path, runner, localizer_config.detector, refresh_settle_s, recalibrate
+        # last: a place added as soon as it answers is refreshed too
+        enter_map_node(
+            stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s
         )
-        stack.callback(refresher.close)
-        stack.enter_context(  # last: a place added as soon as it answers is refreshed too
-            MapNode(
-                session, robot_id, db_path, limits, str(localizer_config.camera),
-                detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
-                on_change=refresher.changed,
-            )
-        )  # fmt: skip
-        yield Service(session, config, runner, localizer, refresher, homing)
+        yield Service(session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing)
 
 
 def _has_no_places(db_path: Path) -> bool:

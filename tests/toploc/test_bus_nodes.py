@@ -301,7 +301,7 @@ def test_liveliness_tokens_come_and_go(zbus, tmp_path):
         LocalizerNode(zbus.server, ROBOT_ID, FakeService()),
         MapNode(zbus.server, ROBOT_ID, tmp_path / "map.db"),
     ):
-        everyone = {"robot", "localizer", "mapdb"}
+        everyone = {"robot", "camera", "localizer", "mapdb"}
         assert wait_for(lambda: alive_nodes(zbus.client) == everyone, timeout_s=10.0)
         robot_node.close()
         assert wait_for(lambda: alive_nodes(zbus.client) == {"localizer", "mapdb"}, 10.0)

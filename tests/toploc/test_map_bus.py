@@ -24,9 +24,9 @@ from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.limits import Limits
 from toploc.nodes import mapdb as mapdb_node
+from toploc.nodes.camera import encode_png
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient
-from toploc.nodes.robot import encode_png
 from toploc.service import Service, start_service
 
 ROBOT_ID = "rmap"

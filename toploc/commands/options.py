@@ -2,13 +2,26 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import sys
+import threading
+from contextlib import ExitStack
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from localizer.cameras import parse_camera
+from localizer.robot_protocol import Camera
+from mapdb.database import MapDatabase
+from mapdb.errors import MapDatabaseError
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
-from toploc.bus_config import exposure_warning
+from toploc.bus_config import bus_config, exposure_warning
+from toploc.limits import Limits, load_limits
+
+if TYPE_CHECKING:
+    from toploc.service import MapRefresher
 
 
 def _check_camera(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
@@ -75,3 +88,139 @@ def warn_if_exposed(cfg: BusConfig) -> None:
     warning = exposure_warning(cfg)
     if warning is not None:
         click.echo(f"WARNING: {warning}", err=True)
+
+
+listen_option = click.option(
+    "--listen",
+    multiple=True,
+    help=f"Zenoh endpoint to listen on (repeatable; default: the --zenoh-config file's, else "
+    f"{DEFAULT_ENDPOINT}).",
+)
+connect_option = click.option(
+    "--connect",
+    multiple=True,
+    help="Zenoh endpoint to connect to (repeatable; default: the --zenoh-config file's).",
+)
+mode_option = click.option(
+    "--mode",
+    type=click.Choice(["peer", "router"]),
+    default=None,
+    help="Zenoh mode (default: the --zenoh-config file's, else peer).",
+)
+limits_option = click.option(
+    "--limits",
+    "limits_path",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see the README's Limits).",
+)
+
+
+def node_options(command: Any) -> Any:
+    """The options of a command that runs nodes: ``--robot-id``, ``--listen``, ``--connect``,
+    ``--mode``, ``--zenoh-config`` and ``--limits`` (see :func:`node_setup`)."""
+    options = (robot_id_option, listen_option, connect_option, mode_option, zenoh_config_option)
+    command = limits_option(command)
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
+def node_setup(
+    robot_id: str,
+    listen: tuple[str, ...],
+    connect: tuple[str, ...],
+    mode: str | None,
+    zenoh_file: Path | None,
+    limits_path: Path | None,
+    listen_when_connecting: bool = True,
+) -> tuple[BusConfig, Limits]:
+    """The bus configuration and limits of :func:`node_options`' values (one-line errors);
+    prints the robot id and warns when the session is exposed. Without
+    ``listen_when_connecting`` (``toploc node``), ``--connect`` without ``--listen`` (and no
+    ``--zenoh-config``) listens nowhere and is a Zenoh client unless ``--mode`` says: the node
+    it connects to routes between its clients (two peers that listen nowhere do not meet)."""
+    try:
+        limits = Limits() if limits_path is None else load_limits(limits_path)
+    except ValueError as error:
+        raise click.ClickException(f"--limits: {error}") from error
+    try:
+        listen_nowhere = connect and not (listen or zenoh_file or listen_when_connecting)
+        given_listen = () if listen_nowhere else listen or None
+        mode = mode or ("client" if listen_nowhere else None)
+        config = bus_config(robot_id, zenoh_file, mode, given_listen, connect or None)
+    except ValueError as error:
+        raise click.ClickException(str(error)) from None
+    click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
+    warn_if_exposed(config)
+    return config, limits
+
+
+def stop_on_signals() -> threading.Event:
+    """An event that SIGINT and SIGTERM set (a node runs until it is set)."""
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    return stop
+
+
+def describe_bus(config: BusConfig) -> str:
+    """``toploc/<id>/** (mode, listen [...], connect [...])``, for the line a node prints."""
+    return (
+        f"toploc/{config.robot_id}/** ({config.mode}, listen {list(config.listen)}, connect "
+        f"{list(config.connect)})"
+    )
+
+
+def check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
+    from toploc.robots import parse_robot_spec  # only the commands that run a robot load it
+
+    try:
+        parse_robot_spec(value)
+    except ValueError as error:
+        raise click.BadParameter(str(error)) from None
+    return value
+
+
+def map_path(db_path: Path | None, new_map: bool) -> Path | None:
+    """``--db``, created empty with ``--new-map``; a missing one is an error."""
+    if db_path is None:
+        if new_map:
+            raise click.UsageError("--new-map needs --db FILE")
+        return None
+    if not db_path.exists():
+        if not new_map:
+            raise click.BadParameter(
+                f"map {db_path} does not exist (--new-map creates it empty)", param_hint="--db"
+            )
+        try:
+            MapDatabase.open(db_path, create=True).close()
+        except MapDatabaseError as error:
+            raise click.ClickException(str(error)) from error
+    return db_path
+
+
+def open_capture_source(stack: ExitStack, source: str) -> Camera | None:
+    """The camera of ``--source`` (None for ``sim``: the robot's own), closed by ``stack``;
+    a source that cannot be opened is a one-line error."""
+    from robot.camera_sources import CameraError, open_source
+
+    if source == "sim":
+        return None
+    try:
+        camera = open_source(source)
+    except CameraError as error:
+        raise click.ClickException(f"--source: {error}") from None
+    stack.callback(getattr(camera, "close", lambda: None))
+    return camera
+
+
+def stopped(refresher: MapRefresher | None) -> None:
+    """Print ``stopped``; if a map calibration still runs in ``refresher``'s thread, end the
+    process now (an interpreter exiting under a native OpenCV call aborts): the map keeps
+    the likelihood it had, as SQLite writes a calibration in one transaction."""
+    click.echo("stopped")
+    if refresher is not None and refresher.running:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)

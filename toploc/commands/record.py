@@ -68,7 +68,7 @@ class Recorder:
 
     def record(self) -> tuple[float, float]:
         """Capture, add, print one line; the odometry position ``(x_m, y_m)`` it was taken at."""
-        from toploc.nodes.robot import encode_png
+        from toploc.nodes.camera import encode_png
 
         odometry = self.odometry()  # position and heading of one instant, just before capture
         capture = self.robot.capture()

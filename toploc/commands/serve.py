@@ -1,11 +1,9 @@
 """``toploc serve``: run the service until Ctrl-C (map, localizer and, by default, the simulated
-robot as Zenoh nodes on one session).
+robot as Zenoh nodes on one session; ``toploc node ROLE`` runs one node per process).
 """
 
 from __future__ import annotations
 
-import signal
-import threading
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -15,32 +13,26 @@ from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
 from localizer.policy import POLICIES
 from localizer.robot_protocol import Camera
-from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
-from robot.camera_sources import CameraError, open_source
 from robot.p2os_base import P2osError
 from robot.worlds import WORLD_NAMES
-from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError
-from toploc.bus_config import bus_config
+from toploc.bus import BusConfig, BusError
 from toploc.commands.options import (
     camera_option,
-    robot_id_option,
-    warn_if_exposed,
-    zenoh_config_option,
+    check_robot_spec,
+    describe_bus,
+    map_path,
+    node_options,
+    node_setup,
+    open_capture_source,
+    stop_on_signals,
+    stopped,
 )
-from toploc.limits import Limits, load_limits
+from toploc.limits import Limits
 from toploc.maps import ensure_world_map
 from toploc.nodes.sim_truth import subscribe_true_pose
-from toploc.robots import ROBOT_SPECS, open_robot, parse_robot_spec, true_pose_camera
-from toploc.service import start_service
-
-
-def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) -> str:
-    try:
-        parse_robot_spec(value)
-    except ValueError as error:
-        raise click.BadParameter(str(error)) from None
-    return value
+from toploc.robots import ROBOT_SPECS, open_served_robot
+from toploc.service import MapRefresher, start_service
 
 
 @click.command("serve")
@@ -57,25 +49,7 @@ def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) 
     is_flag=True,
     help="Create the --db file as an empty map if it does not exist.",
 )
-@robot_id_option
-@click.option(
-    "--listen",
-    multiple=True,
-    help=f"Zenoh endpoint to listen on (repeatable; default: the --zenoh-config file's, else "
-    f"{DEFAULT_ENDPOINT}).",
-)
-@click.option(
-    "--connect",
-    multiple=True,
-    help="Zenoh endpoint to connect to (repeatable; default: the --zenoh-config file's).",
-)
-@click.option(
-    "--mode",
-    type=click.Choice(["peer", "router"]),
-    default=None,
-    help="Zenoh mode (default: the --zenoh-config file's, else peer).",
-)
-@zenoh_config_option
+@node_options
 @click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
 @click.option(
     "--sim-world",
@@ -94,16 +68,9 @@ def _check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) 
     "robot_spec",
     default="sim",
     show_default=True,
-    callback=_check_robot_spec,
+    callback=check_robot_spec,
     help=f"{ROBOT_SPECS}: the simulated robot, a P2OS simulator in this process driven over "
     "the serial protocol (the sim camera at its true pose), or a Pioneer on serial port PORT.",
-)
-@click.option(
-    "--limits",
-    "limits_path",
-    type=click.Path(dir_okay=False, exists=True, path_type=Path),
-    default=None,
-    help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see the README's Limits).",
 )
 @camera_option
 @click.option(
@@ -137,51 +104,18 @@ def serve(
     limits_path: Path | None,
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
-    try:
-        limits = Limits() if limits_path is None else load_limits(limits_path)
-    except ValueError as error:
-        raise click.ClickException(f"--limits: {error}") from error
-    try:
-        config = bus_config(robot_id, zenoh_file, mode, listen or None, connect or None)
-    except ValueError as error:
-        raise click.ClickException(str(error)) from None
-    db_path = _map_path(db_path, new_map)
-    click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
-    warn_if_exposed(config)
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path)
+    db_path = map_path(db_path, new_map)
     if no_sim and source != "sim":
         raise click.ClickException(
             f"--source {source}: the camera is served by this service's robot node, which "
-            "--no-sim leaves out (a camera without a base is not served yet)"
+            "--no-sim leaves out (toploc node camera serves a camera without a base)"
         )
     with ExitStack() as stack:
-        capture_from = None
-        if source != "sim":  # opened first: a wrong source fails before a map is made
-            try:
-                capture_from = open_source(source)
-            except CameraError as error:
-                raise click.ClickException(f"--source: {error}") from None
-            stack.callback(getattr(capture_from, "close", lambda: None))
-        _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim, robot_spec, camera,
-               limits, source, capture_from)  # fmt: skip
-    click.echo("stopped")
-
-
-def _map_path(db_path: Path | None, new_map: bool) -> Path | None:
-    """``--db``, created empty with ``--new-map``; a missing one is an error."""
-    if db_path is None:
-        if new_map:
-            raise click.UsageError("--new-map needs --db FILE")
-        return None
-    if not db_path.exists():
-        if not new_map:
-            raise click.BadParameter(
-                f"map {db_path} does not exist (--new-map creates it empty)", param_hint="--db"
-            )
-        try:
-            MapDatabase.open(db_path, create=True).close()
-        except MapDatabaseError as error:
-            raise click.ClickException(str(error)) from error
-    return db_path
+        capture_from = open_capture_source(stack, source)  # first: fails before a map is made
+        refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
+                           robot_spec, camera, limits, source, capture_from)  # fmt: skip
+    stopped(refresher)
 
 
 def _serve(
@@ -197,21 +131,17 @@ def _serve(
     limits: Limits,
     source: str,
     capture_from: Camera | None,
-) -> None:
-    """Run the service until SIGINT or SIGTERM."""
-    robot_id = config.robot_id
+) -> MapRefresher:
+    """Run the service until SIGINT or SIGTERM; its map refresher."""
     db = db_path or ensure_world_map(sim_world)
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     spec = None if no_sim else robot_spec
     try:
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
-        base_camera, true_pose = None, None
-        if spec is not None and parse_robot_spec(spec)[0] == "p2os" and source == "sim":
-            base_camera, true_pose = true_pose_camera(sim_world, robot_id, db, seed)
         with (
-            open_robot(spec, sim_world, sim_room, seed, db, base_camera) as (robot, where),
+            open_served_robot(spec, source, sim_world, sim_room, seed, db, config.robot_id) as (
+                robot, where, true_pose,
+            ),
             start_service(
                 db, config, robot, policy, localizer_config, limits, capture_from,
                 allow_empty=db_path is not None,
@@ -220,12 +150,12 @@ def _serve(
         ):  # fmt: skip
             if true_pose is not None:
                 stack.callback(subscribe_true_pose(service.session, true_pose).undeclare)
-                where += f", its camera at the true pose on toploc/{robot_id}/sim/true_pose"
+                where += f", its camera at the true pose on toploc/{config.robot_id}/sim/true_pose"
             click.echo(
-                f"serving {db} as toploc/{robot_id}/** ({config.mode}, listen "
-                f"{list(config.listen)}, connect {list(config.connect)}); robot: {where}; "
-                f"camera: {source}. Ctrl-C stops."
+                f"serving {db} as {describe_bus(config)}; robot: {where}; camera: {source}. "
+                "Ctrl-C stops."
             )
             stop.wait()
+        return service.refresher
     except (BusError, MapDatabaseError, P2osError) as error:  # one line naming what failed
         raise click.ClickException(str(error)) from error

@@ -19,14 +19,20 @@ file; :class:`MapClient` is what a client uses to talk to it.
 Each read opens the file read-only for its own duration, each write writable: zenoh runs each
 queryable on a thread of its own and an ``sqlite3`` connection may only be used by the thread
 that made it; a map rebuilt while the node runs is thus served fresh. A map error (a read-only
-map, a lock) becomes an error reply and nothing is written. After a write the node calls
-``on_change`` (the service reloads the localizer's map, see :mod:`toploc.service`).
+map, a lock) becomes an error reply and nothing is written.
+
+- ``map/changed`` (publication, after each write, before its reply): ``{"kind": "changed",
+  "what": "add" | "connect", "stamp"}``. A localizer in this process or another one reloads
+  its map when it hears it (:func:`subscribe_changes`, :class:`toploc.service.MapRefresher`):
+  it reads the same SQLite file, so a map node and a localizer node in two processes need the
+  same file (one machine, or shared storage).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+import time
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
@@ -88,7 +94,7 @@ class MapNode:
 
     ``camera``: the ``--camera`` text the panoramas of ``map/add`` are read with.
     ``detectors``: what ``map/add`` extracts when the map holds no fingerprint yet (otherwise
-    each detector the map holds). ``on_change``: called after each write.
+    each detector the map holds). After each write ``map/changed`` is published.
     ``refresh_after_s``: told in the ``map/add`` reply (when the localizer uses the place).
     """
 
@@ -100,7 +106,6 @@ class MapNode:
         limits: Limits | None = None,
         camera: str = "auto",
         detectors: tuple[str, ...] = ("sift",),
-        on_change: Callable[[], None] | None = None,
         refresh_after_s: float | None = None,
     ) -> None:
         self.session = session
@@ -110,10 +115,11 @@ class MapNode:
         self.limits = limits or Limits()
         self.camera = camera
         self.detectors = detectors
-        self.on_change = on_change
         self.refresh_after_s = refresh_after_s
         k = self.key
+        self._changes = session.declare_publisher(k(bus.MAP_CHANGED))
         self._entities: list[Any] = [
+            self._changes,
             bus.serve(session, k(bus.MAP_ROOMS), self._on_rooms),
             bus.serve(session, k(bus.MAP_PLACES), self._on_places),
             bus.serve(session, k(bus.MAP_EDGES), self._on_edges),
@@ -174,9 +180,8 @@ class MapNode:
                 f"{where}: the map cannot be written, nothing was added ({error})"
             ) from None
 
-    def _changed(self) -> None:
-        if self.on_change is not None:
-            self.on_change()
+    def _changed(self, what: str) -> None:
+        self._changes.put(bus.encode("changed", {"what": what, "stamp": time.time()}))
 
     def _decode_metadata(self, where: str, attachment: bytes | None) -> dict[str, Any]:
         """The checked metadata of a ``map/add`` request (the attachment)."""
@@ -240,7 +245,7 @@ class MapNode:
                 place_id, new = error.place_id, False
                 _check_same_place(where, map_db.place(place_id), place)
         if new:
-            self._changed()
+            self._changed("add")
         reply = {
             "place_id": place_id,
             "room": place.room,  # the stored one: a repeat must name the same room
@@ -280,9 +285,26 @@ class MapNode:
                     "first)"
                 ) from None
         if added:
-            self._changed()
+            self._changed("connect")
         reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
         return bus.Reply(bus.encode("connected", reply))
+
+
+def subscribe_changes(
+    session: zenoh.Session, robot_id: str, on_change: Callable[[], None]
+) -> zenoh.Subscriber:
+    """Call ``on_change()`` for each well-formed ``map/changed`` of ``robot_id``'s map node
+    (a malformed one is ignored); undeclare the subscriber to stop."""
+    key_expr = bus.key(robot_id, bus.MAP_CHANGED)
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        try:
+            bus.decode(key_expr, sample.payload.to_bytes(), {"what": str}, "changed")
+        except bus.BusMessageError:
+            return
+        on_change()
+
+    return session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
 
 
 class MapClient:

@@ -4,10 +4,9 @@
 
 Keys under ``toploc/<robot_id>/``:
 
-- ``camera/capture`` (queryable, at most ``max_captures_per_s``): capture now; reply PNG bytes
-  with the JSON attachment ``{schema, kind: "capture", capture_id, stamp, heading_deg,
-  source}``; the same sample is published on ``camera/panorama``. ``heading_deg`` is the
-  odometry heading at capture time.
+- ``camera/capture``, ``camera/panorama`` and the token ``alive/camera``: served by the
+  :class:`~toploc.nodes.camera.CameraNode` the robot node composes (unless ``serve_camera`` is
+  false: a camera node of its own then serves them, ``toploc node camera``).
 - ``base/cmd`` (queryable): ``{kind: "cmd", turn_deg, forward_m}`` -> ``{turned_deg, moved_m,
   bumped, odom}`` once the move is done (``odom``: the ``base/odom`` fields after the move); a
   malformed command, or one beyond the node's :class:`~toploc.limits.Limits`, gets an error
@@ -26,7 +25,6 @@ query waits for a move in progress. ``base/stop`` does not wait for it.
 from __future__ import annotations
 
 import concurrent.futures
-import itertools
 import math
 import threading
 import time
@@ -44,7 +42,8 @@ from localizer.panorama_io import (
 )
 from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robot
 from toploc import bus
-from toploc.limits import Limits, RateLimit
+from toploc.limits import Limits
+from toploc.nodes.camera import CameraNode
 
 NODE_NAME = "robot"
 CMD_FIELDS: dict[str, bus.FieldType] = {"turn_deg": float, "forward_m": float}
@@ -81,16 +80,6 @@ def odometry_fields(odometry: Odometry, stamp_s: float) -> dict[str, float]:
 def odometry_from_fields(message: dict[str, Any]) -> Odometry:
     """Inverse of :func:`odometry_fields` (on a checked message)."""
     return Odometry(message["x_m"], message["y_m"], math.radians(message["heading_deg"]))
-
-
-def encode_png(image: np.ndarray) -> bytes:
-    """Lossless PNG bytes of a uint8 grey (H x W) or BGR (H x W x 3) image."""
-    if image.dtype != np.uint8 or image.ndim not in (2, 3):
-        raise ValueError(f"panorama must be uint8 HxW or HxWx3, got {image.dtype} {image.shape}")
-    ok, buffer = cv2.imencode(".png", image)
-    if not ok:
-        raise ValueError(f"OpenCV could not encode a {image.shape} image as PNG")
-    return buffer.tobytes()
 
 
 def decode_png(key_expr: str, data: bytes, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
@@ -135,7 +124,8 @@ class MoveStoppedError(RuntimeError):
 class RobotNode:
     """Serve ``robot`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``). ``camera``: where ``camera/capture`` takes its panoramas (a camera that is
-    not the robot's own, e.g. ``robot.camera_sources``); None: ``robot.capture``."""
+    not the robot's own, e.g. ``robot.camera_sources``); None: ``robot.capture``.
+    ``serve_camera`` false: the base only (a camera node serves the captures)."""
 
     def __init__(
         self,
@@ -144,6 +134,7 @@ class RobotNode:
         robot: Robot,
         limits: Limits | None = None,
         camera: Camera | None = None,
+        serve_camera: bool = True,
     ) -> None:
         self.session = session
         self.robot_id = bus.check_robot_id(robot_id)
@@ -152,21 +143,21 @@ class RobotNode:
         self.camera: Camera = robot if camera is None else camera
         self.limits = limits or Limits()
         self._lock = threading.Lock()
-        self._captures = RateLimit(self.limits.max_captures_per_s)
+        self.camera_node = None
+        if serve_camera:  # first: a camera node already running fails it before anything else
+            self.camera_node = CameraNode(
+                session, robot_id, self.camera, self.limits, self._heading_deg, self._lock
+            )
         # One thread runs the moves, so that a move past its timeout can be stopped and answered.
         self._mover = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="base-move")
-        self._capture_ids = itertools.count(1)
         self._stops = 0  # counts base/stop; a move checks only that it changed
         k = self.key
-        self._panorama = session.declare_publisher(k(bus.CAMERA_PANORAMA))
         self._odom = session.declare_publisher(k(bus.BASE_ODOM))
         self._bumpers = session.declare_publisher(k(bus.BASE_BUMPERS))
         self._entities: list[Any] = [
-            bus.serve(session, k(bus.CAMERA_CAPTURE), self._on_capture),
             bus.serve(session, k(bus.BASE_CMD), self._on_cmd),
             bus.serve(session, k(bus.BASE_STOP), self._on_stop),
             bus.serve(session, k(bus.BASE_ODOM), self._on_odom),
-            self._panorama,
             self._odom,
             self._bumpers,
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
@@ -178,6 +169,8 @@ class RobotNode:
 
     def close(self) -> None:
         """Undeclare everything and stop the base (the session stays open)."""
+        if self.camera_node is not None:
+            self.camera_node.close()
         bus.undeclare_all(self._entities)
         self.robot.stop()
         self._mover.shutdown(wait=False, cancel_futures=True)
@@ -188,23 +181,8 @@ class RobotNode:
     def __exit__(self, *exc_info: object) -> None:
         self.close()
 
-    def _on_capture(self, _payload: bytes | None) -> bus.Reply:
-        if not self._captures.allow():
-            raise bus.BusMessageError(
-                f"rate limited: at most {self.limits.max_captures_per_s} captures per second"
-            )
-        with self._lock:
-            capture = self.camera.capture()
-            heading_rad = self.robot.odometry().heading_rad
-        meta = {
-            "capture_id": next(self._capture_ids),
-            "stamp": capture.stamp_s,
-            "heading_deg": math.degrees(heading_rad),
-            "source": capture.source,
-        }
-        reply = bus.Reply(encode_png(capture.image), bus.encode("capture", meta))
-        self._panorama.put(reply.payload, attachment=reply.attachment)
-        return reply
+    def _heading_deg(self) -> float:
+        return math.degrees(self.robot.odometry().heading_rad)
 
     def _move(
         self, turn_deg: float, forward_m: float, stops_seen: int

@@ -1,0 +1,252 @@
+"""``toploc node robot|camera|localizer|map``: one node per process, so that the robot's driver
+runs on the robot and the localizer elsewhere if wanted (``toploc serve`` runs them all in one).
+
+Each command opens its own Zenoh session, enters its node with the ``enter_*`` function of
+:mod:`toploc.service` that ``serve`` uses too, prints the robot id and what runs, and runs until
+Ctrl-C or SIGTERM. Each node refuses to start when its role already runs for the robot id
+(``alive/<role>``). The localizer node reloads its map on the map node's ``map/changed``; both
+read the same SQLite file, so they need the same file (one machine, or shared storage).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import ExitStack
+from pathlib import Path
+
+import click
+import zenoh
+
+from localizer.cameras import parse_camera
+from localizer.localizer import LocalizerConfig
+from localizer.policy import POLICIES
+from mapdb.errors import MapDatabaseError
+from robot.camera_sources import CameraError
+from robot.p2os_base import P2osError
+from robot.worlds import WORLD_NAMES
+from toploc.bus import BusConfig, BusError, open_session
+from toploc.commands.options import (
+    camera_option,
+    check_robot_spec,
+    describe_bus,
+    map_path,
+    node_options,
+    node_setup,
+    open_capture_source,
+    stop_on_signals,
+    stopped,
+)
+from toploc.limits import Limits
+from toploc.maps import ensure_world_map
+from toploc.nodes.sim_truth import subscribe_true_pose
+from toploc.robots import ROBOT_SPECS, open_served_robot
+from toploc.service import (
+    MapRefresher,
+    enter_camera_node,
+    enter_localizer_nodes,
+    enter_map_node,
+    enter_robot_node,
+)
+
+Enter = Callable[[ExitStack, zenoh.Session, Limits], str]
+"""Enters a node (or two) on a session; returns what runs, for the line printed."""
+_ERRORS = (BusError, MapDatabaseError, P2osError, CameraError)
+
+db_option = click.option(
+    "--db",
+    "db_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The map (SQLite). The map node and the localizer node need the same file.",
+)
+
+
+@click.group("node")
+def node_group() -> None:
+    """Run one node of the service per process (toploc serve runs them all in one)."""
+
+
+def _run(config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: ExitStack) -> None:
+    """Open the session, ``enter(stack, session, limits)`` the node(s), print what runs and
+    wait for SIGINT or SIGTERM; a bus, map, base or camera error is one line."""
+    stop = stop_on_signals()
+    try:
+        session = stack.enter_context(open_session(config))
+        what = enter(stack, session, limits)
+        click.echo(f"{describe}{what} as {describe_bus(config)}. Ctrl-C stops.")
+        stop.wait()
+    except _ERRORS as error:
+        raise click.ClickException(str(error)) from error
+
+
+@node_group.command("robot")
+@click.option(
+    "--robot",
+    "robot_spec",
+    default="sim",
+    show_default=True,
+    callback=check_robot_spec,
+    help=f"{ROBOT_SPECS}: the base this node drives (as toploc serve --robot).",
+)
+@click.option(
+    "--source",
+    default="sim",
+    show_default=True,
+    help="Where camera/capture takes panoramas (as toploc serve --source).",
+)
+@click.option(
+    "--no-camera",
+    is_flag=True,
+    help="Serve the base only: a toploc node camera serves camera/capture for this robot id.",
+)
+@click.option("--sim-world", type=click.Choice(WORLD_NAMES), default="building", show_default=True)
+@click.option("--sim-room", default="office_b", show_default=True, help="Where it is kidnapped.")
+@click.option("--seed", type=int, default=1, show_default=True)
+@click.option(
+    "--db",
+    "db_path",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="A map whose panorama size the sim camera renders (default: the --sim-world's map "
+    "from the cache, as serve).",
+)
+@node_options
+def robot_node(
+    robot_spec: str,
+    source: str,
+    no_camera: bool,
+    sim_world: str,
+    sim_room: str,
+    seed: int,
+    db_path: Path | None,
+    robot_id: str,
+    listen: tuple[str, ...],
+    connect: tuple[str, ...],
+    mode: str | None,
+    zenoh_file: Path | None,
+    limits_path: Path | None,
+) -> None:
+    """The robot node: the base (base/*) and its camera (camera/*) until interrupted."""
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
+    with ExitStack() as stack:
+        camera = None if no_camera else open_capture_source(stack, source)
+        db = db_path or ensure_world_map(sim_world)
+        try:
+            robot, where, true_pose = stack.enter_context(
+                open_served_robot(robot_spec, source, sim_world, sim_room, seed, db, robot_id)
+            )
+        except _ERRORS as error:
+            raise click.ClickException(str(error)) from error
+        assert robot is not None  # a spec always opens a robot
+
+        def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
+            enter_robot_node(stack, session, robot_id, robot, limits, camera, not no_camera)
+            text = where
+            if true_pose is not None:
+                stack.callback(subscribe_true_pose(session, true_pose).undeclare)
+                text += f", its camera at the true pose on toploc/{robot_id}/sim/true_pose"
+            return f"{text}; camera: {'none (--no-camera)' if no_camera else source}"
+
+        _run(config, limits, "robot node: ", enter, stack)
+    click.echo("stopped")
+
+
+@node_group.command("camera")
+@click.option(
+    "--source",
+    required=True,
+    help="Where camera/capture takes panoramas: uvc:..., files:DIR, ptu:DIR, omni:... (see "
+    "the README's Cameras; sim needs a robot: toploc node robot).",
+)
+@node_options
+def camera_node(
+    source: str,
+    robot_id: str,
+    listen: tuple[str, ...],
+    connect: tuple[str, ...],
+    mode: str | None,
+    zenoh_file: Path | None,
+    limits_path: Path | None,
+) -> None:
+    """A camera without a base: camera/capture and camera/panorama until interrupted."""
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
+    with ExitStack() as stack:
+        if source == "sim":
+            raise click.BadParameter(
+                "sim renders the robot's view: run toploc node robot", param_hint="--source"
+            )
+        camera = open_capture_source(stack, source)
+        assert camera is not None
+
+        def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
+            enter_camera_node(stack, session, robot_id, camera, limits)
+            return source
+
+        _run(config, limits, "camera node: ", enter, stack)
+    click.echo("stopped")
+
+
+@node_group.command("localizer")
+@db_option
+@click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
+@camera_option
+@node_options
+def localizer_node(
+    db_path: Path,
+    policy: str,
+    camera: str,
+    robot_id: str,
+    listen: tuple[str, ...],
+    connect: tuple[str, ...],
+    mode: str | None,
+    zenoh_file: Path | None,
+    limits_path: Path | None,
+) -> None:
+    """The localizer and homing nodes, driving the bus's robot node, until interrupted."""
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
+    db = map_path(db_path, new_map=False)
+    assert db is not None
+    localizer_config = LocalizerConfig(camera=parse_camera(camera))
+
+    def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
+        refresher.append(enter_localizer_nodes(
+            stack, session, robot_id, db, policy, localizer_config, limits,
+            allow_empty=True,
+        ).refresher)  # fmt: skip
+        return f"{db} (reloaded on map/changed), driving the bus's robot node"
+
+    refresher: list[MapRefresher] = []
+    with ExitStack() as stack:
+        _run(config, limits, "localizer and homing nodes: ", enter, stack)
+    stopped(refresher[0] if refresher else None)
+
+
+@node_group.command("map")
+@db_option
+@click.option("--new-map", is_flag=True, help="Create the --db file empty if it does not exist.")
+@camera_option
+@node_options
+def map_node(
+    db_path: Path,
+    new_map: bool,
+    camera: str,
+    robot_id: str,
+    listen: tuple[str, ...],
+    connect: tuple[str, ...],
+    mode: str | None,
+    zenoh_file: Path | None,
+    limits_path: Path | None,
+) -> None:
+    """The map node (map/*; publishes map/changed after each write) until interrupted."""
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
+    db = map_path(db_path, new_map)
+    assert db is not None
+    localizer_config = LocalizerConfig(camera=parse_camera(camera))
+
+    def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
+        enter_map_node(stack, session, robot_id, db, limits, localizer_config)
+        return str(db)
+
+    with ExitStack() as stack:
+        _run(config, limits, "map node: ", enter, stack)
+    click.echo("stopped")

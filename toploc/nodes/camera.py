@@ -1,0 +1,124 @@
+"""A camera on the Zenoh bus: :class:`CameraNode` serves ``camera/capture`` (and publishes
+``camera/panorama``) from a :class:`~localizer.robot_protocol.Camera`.
+
+It is the one implementation of the capture keys: a :class:`~toploc.nodes.robot.RobotNode`
+composes one (its camera, the base's heading, the base's lock), and ``toploc node camera`` runs
+one alone, for a camera without a base (its heading is then the newest ``base/odom`` of the
+bus's robot node, 0 when none answers).
+
+Keys under ``toploc/<robot_id>/``:
+
+- ``camera/capture`` (queryable, at most ``max_captures_per_s``): capture now; reply PNG bytes
+  with the JSON attachment ``{schema, kind: "capture", capture_id, stamp, heading_deg,
+  source}``; the same sample is published on ``camera/panorama``. ``heading_deg`` is the
+  odometry heading at capture time.
+- liveliness token ``alive/camera`` (also while a robot node serves its camera): one node per
+  robot id serves the capture keys; a second one, or a robot node that would serve its camera
+  while a camera node runs, refuses to start (run that robot node with ``--no-camera``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import math
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+import numpy as np
+import zenoh
+
+from localizer.robot_protocol import Camera
+from toploc import bus
+from toploc.limits import Limits, RateLimit
+
+NODE_NAME = "camera"
+BUS_HEADING_TIMEOUT_S = 0.5
+"""How long a camera node alone waits for the robot node's ``base/odom`` per capture."""
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    """Lossless PNG bytes of a uint8 grey (H x W) or BGR (H x W x 3) image."""
+    if image.dtype != np.uint8 or image.ndim not in (2, 3):
+        raise ValueError(f"panorama must be uint8 HxW or HxWx3, got {image.dtype} {image.shape}")
+    ok, buffer = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"OpenCV could not encode a {image.shape} image as PNG")
+    return buffer.tobytes()
+
+
+class CameraNode:
+    """Serve ``camera`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
+    (or ``with``). ``heading_deg``: the odometry heading at capture time (default: the bus's
+    robot node's, see :func:`bus_heading`); ``lock``: held around a capture and its heading
+    (a robot node's, so a move waits for the capture)."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        robot_id: str,
+        camera: Camera,
+        limits: Limits | None = None,
+        heading_deg: Callable[[], float] | None = None,
+        lock: threading.Lock | None = None,
+    ) -> None:
+        self.session = session
+        self.robot_id = bus.check_robot_id(robot_id)
+        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        self.camera = camera
+        self.limits = limits or Limits()
+        self._remote: Any = None
+        if heading_deg is None:
+            heading_deg = self._bus_heading
+        self.heading_deg = heading_deg
+        self._lock = lock or threading.Lock()
+        self._captures = RateLimit(self.limits.max_captures_per_s)
+        self._capture_ids = itertools.count(1)
+        self._panorama = session.declare_publisher(bus.key(robot_id, bus.CAMERA_PANORAMA))
+        self._entities: list[Any] = [
+            bus.serve(session, bus.key(robot_id, bus.CAMERA_CAPTURE), self._on_capture),
+            self._panorama,
+            session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
+        ]
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open; the camera is the caller's)."""
+        bus.undeclare_all(self._entities)
+        if self._remote is not None:
+            self._remote.close()
+
+    def __enter__(self) -> CameraNode:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _bus_heading(self) -> float:
+        """The newest heading of the bus's robot node (``base/odom``), 0 if none answers."""
+        from toploc.nodes.robot import RemoteRobot  # robot.py composes this module
+
+        if self._remote is None:
+            self._remote = RemoteRobot(self.session, self.robot_id, BUS_HEADING_TIMEOUT_S)
+        with contextlib.suppress(bus.BusError):
+            return math.degrees(self._remote.odometry().heading_rad)
+        return 0.0
+
+    def _on_capture(self, _payload: bytes | None) -> bus.Reply:
+        if not self._captures.allow():
+            raise bus.BusMessageError(
+                f"rate limited: at most {self.limits.max_captures_per_s} captures per second"
+            )
+        with self._lock:
+            capture = self.camera.capture()
+            heading_deg = self.heading_deg()
+        meta = {
+            "capture_id": next(self._capture_ids),
+            "stamp": capture.stamp_s,
+            "heading_deg": heading_deg,
+            "source": capture.source,
+        }
+        reply = bus.Reply(encode_png(capture.image), bus.encode("capture", meta))
+        self._panorama.put(reply.payload, attachment=reply.attachment)
+        return reply
