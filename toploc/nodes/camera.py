@@ -33,6 +33,7 @@ import zenoh
 from localizer.robot_protocol import Camera
 from toploc import bus
 from toploc.limits import Limits, RateLimit
+from toploc.nodes.node import Node
 
 NODE_NAME = "camera"
 BUS_HEADING_TIMEOUT_S = 0.5
@@ -49,7 +50,7 @@ def encode_png(image: np.ndarray) -> bytes:
     return buffer.tobytes()
 
 
-class CameraNode:
+class CameraNode(Node):
     """Serve ``camera`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``). ``heading_deg``: the odometry heading at capture time (default: the bus's
     robot node's, see :func:`bus_heading`); ``lock``: held around a capture and its heading
@@ -64,9 +65,7 @@ class CameraNode:
         heading_deg: Callable[[], float] | None = None,
         lock: threading.Lock | None = None,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME)
         self.camera = camera
         self.limits = limits or Limits()
         self._remote: Any = None
@@ -77,7 +76,7 @@ class CameraNode:
         self._captures = RateLimit(self.limits.max_captures_per_s)
         self._capture_ids = itertools.count(1)
         self._panorama = session.declare_publisher(bus.key(robot_id, bus.CAMERA_PANORAMA))
-        self._entities: list[Any] = [
+        self.entities += [
             bus.serve(session, bus.key(robot_id, bus.CAMERA_CAPTURE), self._on_capture),
             self._panorama,
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
@@ -85,15 +84,9 @@ class CameraNode:
 
     def close(self) -> None:
         """Undeclare everything (the session stays open; the camera is the caller's)."""
-        bus.undeclare_all(self._entities)
+        super().close()
         if self._remote is not None:
             self._remote.close()
-
-    def __enter__(self) -> CameraNode:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def _bus_heading(self) -> float:
         """The newest heading of the bus's robot node (``base/odom``), 0 if none answers."""

@@ -60,6 +60,7 @@ from localizer.visual_homing import HomingParams, HomingProgress, HomingResult, 
 from mapdb.records import Fingerprint
 from toploc import bus
 from toploc.limits import Limits
+from toploc.nodes.node import Node
 from toploc.runner import LocalizationRunner
 
 NODE_NAME = "homing"
@@ -294,7 +295,7 @@ def result_message(place_id: int, result: HomingResult) -> dict[str, Any]:
     }
 
 
-class HomingNode:
+class HomingNode(Node):
     """Serve ``service`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``)."""
 
@@ -305,32 +306,16 @@ class HomingNode:
         service: HomingService,
         limits: Limits | None = None,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME)
         self.service = service
         self.limits = limits or Limits()
         self._publisher = session.declare_publisher(self.key(bus.HOMING_PROGRESS))
-        self._entities: list[Any] = [
+        self.entities += [
             bus.serve(session, self.key(bus.HOMING_GOAL), self._on_goal, threaded=True),
             bus.serve(session, self.key(bus.HOMING_CANCEL), self._on_cancel),
             self._publisher,
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
-
-    def close(self) -> None:
-        """Undeclare everything (the session stays open)."""
-        bus.undeclare_all(self._entities)
-
-    def __enter__(self) -> HomingNode:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def publish(self, progress: dict[str, Any]) -> None:
         """Publish one ``homing/progress`` message (a failure is logged: the drive goes on)."""

@@ -45,6 +45,7 @@ import zenoh
 from localizer.belief import RoomBelief
 from toploc import bus
 from toploc.limits import Limits
+from toploc.nodes.node import Node
 from toploc.runner import NoPlacesYetError
 
 NODE_NAME = "localizer"
@@ -109,7 +110,7 @@ def check_prior(where: str, prior: Any) -> dict[str, float] | None:
     return {room: float(p) for room, p in prior.items()}
 
 
-class LocalizerNode:
+class LocalizerNode(Node):
     """Serve ``service`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``)."""
 
@@ -120,9 +121,7 @@ class LocalizerNode:
         service: LocalizationService,
         limits: Limits | None = None,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME)
         self.service = service
         self.limits = limits or Limits()
         self._publish_lock = threading.Lock()
@@ -131,7 +130,7 @@ class LocalizerNode:
         self._robot_seen = False
         self._robot_gone = False
         self._publisher = session.declare_publisher(self.key(bus.LOCALIZER_BELIEF))
-        self._entities: list[Any] = [
+        self.entities += [
             session.liveliness().declare_subscriber(
                 bus.alive_key(robot_id, ROBOT_NODE),
                 zenoh.handlers.Callback(self._on_robot_token),
@@ -143,20 +142,6 @@ class LocalizerNode:
             self._publisher,
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
-
-    def close(self) -> None:
-        """Undeclare everything (the session stays open)."""
-        bus.undeclare_all(self._entities)
-
-    def __enter__(self) -> LocalizerNode:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     @property
     def robot_gone(self) -> bool:

@@ -46,6 +46,7 @@ from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
 from mapdb.records import NewPlace, Place, check_name
 from toploc import bus
 from toploc.limits import Limits
+from toploc.nodes.node import Node
 
 NODE_NAME = "mapdb"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -89,7 +90,7 @@ def _check_same_place(where: str, stored: Place, sent: NewPlace) -> None:
         )
 
 
-class MapNode:
+class MapNode(Node):
     """Serve the map at ``db_path`` on the bus within ``limits``; ``close()`` (or ``with``).
 
     ``camera``: the ``--camera`` text the panoramas of ``map/add`` are read with.
@@ -108,9 +109,7 @@ class MapNode:
         detectors: tuple[str, ...] = ("sift",),
         refresh_after_s: float | None = None,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME)
         self.db_path = Path(db_path)
         self.limits = limits or Limits()
         self.camera = camera
@@ -118,7 +117,7 @@ class MapNode:
         self.refresh_after_s = refresh_after_s
         k = self.key
         self._changes = session.declare_publisher(k(bus.MAP_CHANGED))
-        self._entities: list[Any] = [
+        self.entities += [
             self._changes,
             bus.serve(session, k(bus.MAP_ROOMS), self._on_rooms),
             bus.serve(session, k(bus.MAP_PLACES), self._on_places),
@@ -127,20 +126,6 @@ class MapNode:
             bus.serve(session, k(bus.MAP_CONNECT), self._on_connect),
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
-
-    def close(self) -> None:
-        """Undeclare everything (the session stays open)."""
-        bus.undeclare_all(self._entities)
-
-    def __enter__(self) -> MapNode:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def _open(self) -> MapDatabase:
         return MapDatabase.open(self.db_path, readonly=True)

@@ -44,6 +44,7 @@ from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robo
 from toploc import bus
 from toploc.limits import Limits
 from toploc.nodes.camera import CameraNode
+from toploc.nodes.node import Node
 
 NODE_NAME = "robot"
 CMD_FIELDS: dict[str, bus.FieldType] = {"turn_deg": float, "forward_m": float}
@@ -121,7 +122,7 @@ class MoveStoppedError(RuntimeError):
     """A move was cancelled by ``base/stop`` (or its timeout) before it started."""
 
 
-class RobotNode:
+class RobotNode(Node):
     """Serve ``robot`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``). ``camera``: where ``camera/capture`` takes its panoramas (a camera that is
     not the robot's own, e.g. ``robot.camera_sources``); None: ``robot.capture``.
@@ -136,9 +137,7 @@ class RobotNode:
         camera: Camera | None = None,
         serve_camera: bool = True,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        bus.ensure_unique_node(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME)
         self.robot = robot
         self.camera: Camera = robot if camera is None else camera
         self.limits = limits or Limits()
@@ -154,7 +153,7 @@ class RobotNode:
         k = self.key
         self._odom = session.declare_publisher(k(bus.BASE_ODOM))
         self._bumpers = session.declare_publisher(k(bus.BASE_BUMPERS))
-        self._entities: list[Any] = [
+        self.entities += [
             bus.serve(session, k(bus.BASE_CMD), self._on_cmd),
             bus.serve(session, k(bus.BASE_STOP), self._on_stop),
             bus.serve(session, k(bus.BASE_ODOM), self._on_odom),
@@ -163,23 +162,13 @@ class RobotNode:
             session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
 
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
-
     def close(self) -> None:
         """Undeclare everything and stop the base (the session stays open)."""
         if self.camera_node is not None:
             self.camera_node.close()
-        bus.undeclare_all(self._entities)
+        super().close()
         self.robot.stop()
         self._mover.shutdown(wait=False, cancel_futures=True)
-
-    def __enter__(self) -> RobotNode:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
 
     def _heading_deg(self) -> float:
         return math.degrees(self.robot.odometry().heading_rad)
