@@ -146,7 +146,10 @@ class P2osBase:
     def _connect_once(self) -> None:
         s = self.settings
         try:
-            ser = serial.Serial(self.port, self.baud, timeout=0.05, write_timeout=s.write_timeout_s)
+            # exclusive: a second toploc (or anything else that asks) cannot drive this base too
+            ser = serial.Serial(
+                self.port, self.baud, timeout=0.05, write_timeout=s.write_timeout_s, exclusive=True
+            )
         except (serial.SerialException, OSError, ValueError) as error:
             raise P2osError(f"cannot open serial port {self.port}: {error}") from error
         try:

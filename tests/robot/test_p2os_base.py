@@ -236,3 +236,11 @@ def test_base_with_sim_camera_renders_at_the_true_pose(
     expected = render_panorama(sim_camera._scene, sim.true_pose, camera, seed=(0, 17, 0), grey=True)
     assert np.array_equal(shot.image, expected)
     assert robot.odometry().y_m == pytest.approx(0.4, abs=0.03)
+
+
+def test_a_second_client_cannot_open_a_port_in_use(sim: P2osSimulator, base: P2osBase) -> None:
+    """Two toploc processes on one base would both drive it: the port is opened exclusively."""
+    second = P2osBase(sim.port, settings=FAST)
+    with pytest.raises(P2osError, match=f"cannot open serial port {sim.port}"):
+        second.connect()
+    assert [c.command for c in sim.received].count(Command.OPEN) == 1  # the first one's only
