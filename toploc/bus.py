@@ -526,10 +526,26 @@ def request_json(
     return decode(key_expr, sample.payload.to_bytes(), required)
 
 
+UNDECLARE_RETRY_S = 2.0
+
+
 def undeclare_all(entities: Sequence[Any]) -> None:
-    """Undeclare queryables, publishers, subscribers and tokens; ignore a closed session."""
+    """Undeclare queryables, publishers, subscribers and tokens; ignore a closed session.
+
+    zenoh-python refuses (``RuntimeError: Already borrowed``) to undeclare an entity while
+    another thread uses it, e.g. a liveliness subscriber whose callback is running: that one is
+    retried for up to ``UNDECLARE_RETRY_S`` seconds.
+    """
     for entity in entities:
-        try:
-            entity.undeclare()
-        except zenoh.ZError:
-            _log.debug("undeclare after the session closed: %r", entity)
+        deadline = time.monotonic() + UNDECLARE_RETRY_S
+        while True:
+            try:
+                entity.undeclare()
+            except zenoh.ZError:
+                _log.debug("undeclare after the session closed: %r", entity)
+            except RuntimeError as error:
+                if "borrowed" in str(error) and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                    continue
+                raise
+            break
