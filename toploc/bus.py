@@ -526,6 +526,27 @@ def request_json(
     return decode(key_expr, sample.payload.to_bytes(), required)
 
 
+def subscribe(
+    session: zenoh.Session,
+    key_expr: str,
+    read: Callable[[str, bytes], Any],
+    callback: Callable[[Any], object],
+) -> zenoh.Subscriber:
+    """Call ``callback(read(key_expr, payload))`` for each publication on ``key_expr`` (on a
+    zenoh thread); one that ``read`` refuses (:class:`BusMessageError`) is logged and skipped.
+    Undeclare the subscriber to stop."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        try:
+            message = read(key_expr, sample.payload.to_bytes())
+        except BusMessageError as error:
+            _log.warning("skipping a publication: %s", error)
+            return
+        callback(message)
+
+    return session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
+
+
 UNDECLARE_RETRY_S = 2.0
 
 

@@ -391,17 +391,12 @@ class HomingClient:
     def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
         """Call ``callback(progress)`` for each ``homing/progress`` message (on a zenoh
         thread); malformed ones are skipped. :meth:`close` undeclares."""
-        key_expr = self.key(bus.HOMING_PROGRESS)
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            try:
-                message = bus.decode(key_expr, sample.payload.to_bytes(), {"place_id": int})
-            except bus.BusMessageError as error:
-                _log.warning("skipping a publication: %s", error)
-                return
-            callback(message)
-
-        subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
+        subscriber = bus.subscribe(
+            self.session,
+            self.key(bus.HOMING_PROGRESS),
+            lambda key_expr, data: bus.decode(key_expr, data, {"place_id": int}),
+            callback,
+        )
         self._subscribers.append(subscriber)
         return subscriber
 

@@ -270,18 +270,12 @@ class LocalizerClient:
     def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
         """Call ``callback(belief)`` for each published belief (on a zenoh thread); malformed
         publications are skipped. Undeclare the returned subscriber, or :meth:`close`."""
-        key_expr = self.key(bus.LOCALIZER_BELIEF)
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            try:
-                message = bus.decode(key_expr, sample.payload.to_bytes())
-                belief = check_belief(key_expr, message)
-            except bus.BusMessageError as error:
-                _log.warning("skipping a publication: %s", error)
-                return
-            callback(belief)
-
-        subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
+        subscriber = bus.subscribe(
+            self.session,
+            self.key(bus.LOCALIZER_BELIEF),
+            lambda key_expr, data: check_belief(key_expr, bus.decode(key_expr, data)),
+            callback,
+        )
         self._subscribers.append(subscriber)
         return subscriber
 

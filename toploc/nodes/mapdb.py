@@ -280,16 +280,12 @@ def subscribe_changes(
 ) -> zenoh.Subscriber:
     """Call ``on_change()`` for each well-formed ``map/changed`` of ``robot_id``'s map node
     (a malformed one is ignored); undeclare the subscriber to stop."""
-    key_expr = bus.key(robot_id, bus.MAP_CHANGED)
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        try:
-            bus.decode(key_expr, sample.payload.to_bytes(), {"what": str}, "changed")
-        except bus.BusMessageError:
-            return
-        on_change()
-
-    return session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample))
+    return bus.subscribe(
+        session,
+        bus.key(robot_id, bus.MAP_CHANGED),
+        lambda key_expr, data: bus.decode(key_expr, data, {"what": str}, "changed"),
+        lambda _message: on_change(),
+    )
 
 
 class MapClient:

@@ -250,8 +250,11 @@ class RemoteRobot:
         self.last_capture_meta: dict[str, Any] | None = None
         self._odom_lock = threading.Lock()
         self._last_odom: tuple[float, Odometry] | None = None  # (stamp_s, odometry)
-        self._odom_sub = session.declare_subscriber(
-            bus.key(robot_id, bus.BASE_ODOM), zenoh.handlers.Callback(self._on_odom)
+        self._odom_sub = bus.subscribe(  # odometry() falls back to a query without one
+            session,
+            bus.key(robot_id, bus.BASE_ODOM),
+            lambda key_expr, data: bus.decode(key_expr, data, ODOM_FIELDS),
+            self._remember,
         )
 
     def close(self) -> None:
@@ -265,13 +268,6 @@ class RemoteRobot:
             if self._last_odom is None or odom["stamp"] >= self._last_odom[0]:
                 self._last_odom = (odom["stamp"], odometry)
         return odometry
-
-    def _on_odom(self, sample: zenoh.Sample) -> None:
-        try:
-            message = bus.decode(str(sample.key_expr), sample.payload.to_bytes(), ODOM_FIELDS)
-        except bus.BusMessageError:
-            return  # a bad publication is ignored; odometry() falls back to a query
-        self._remember(message)
 
     def capture(self) -> Capture:
         """Query ``camera/capture``; the attachment is kept in :attr:`last_capture_meta`."""
