@@ -23,15 +23,16 @@ before SIFT, ``localizer.features.CAMERA_DEFAULTS``); ``2048`` is full resolutio
 queries both (``max_width_px=2048``). ``LocalizerConfig`` has no extraction override, so the
 full-resolution query goes through a subclass of ``Localizer`` whose ``extract`` passes it.
 
-Extraction on both cores: the same queries are extracted with OpenCV's default thread count
-(``cv2.getNumThreads()``), with ``cv2.setNumThreads(1)``, and with the *split prototype*
-(:func:`extract_split`): the circularly padded panorama cut into two halves that overlap by the
-product's wrap margin on each side, one thread each (OpenCV releases the GIL; ``setNumThreads(1)``
-meanwhile), keypoints kept in their own half and merged. It is also timed inside
-``Localizer.observe`` on the 100-place map (``--split-size``), at each width.
+Extraction on both cores: the localizer detects a query's two halves (with the wrap margin of
+overlap) on two threads (``LocalizerConfig.extraction_threads = 2``); retrieval, matching and
+verification also use both (``IndexParams.threads``, ``EvidenceParams.threads``). The same
+queries are extracted as one call with OpenCV's default thread count (``cv2.getNumThreads()``),
+as one call with ``cv2.setNumThreads(1)``, and as the product's two halves; and the map of
+``--one-thread-size`` places is also timed with one-call extraction (``extraction_threads=1``),
+so the ratio can be read against both.
 
     python benchmarks/bench_real_resolution.py MAP QUERIES [--sizes 30,100,300] [--queries 20]
-        [--widths 1024,2048] [--full-sizes 30,100,300]
+        [--widths 1024,2048] [--full-sizes 30,100,300] [--one-thread-size 100]
 """
 
 from __future__ import annotations
@@ -45,9 +46,9 @@ import statistics
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -55,16 +56,9 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from homing.bearings import bearing_rad_from_column
-from localizer.cameras import CameraSpec, panorama_kind
-from localizer.features import (
-    CAMERA_DEFAULTS,
-    extract,
-    extract_with_camera,
-    pad_circular,
-    params_from_preset,
-)
-from localizer.localizer import LoadedMap, Localizer, to_grey
+from localizer.cameras import CameraSpec
+from localizer.features import extract_with_camera
+from localizer.localizer import LoadedMap, Localizer, LocalizerConfig, to_grey
 from localizer.panorama_io import read_panorama
 from mapdb.build import Extractor, build_map
 from mapdb.database import MapDatabase
@@ -74,10 +68,9 @@ from toploc.extraction import resolve_extractor
 from toploc.maps import load_map
 
 DEFAULT_WIDTH = 1024  # CAMERA_DEFAULTS["equirect"]["max_width_px"]
-_POOL = ThreadPoolExecutor(2)
 
 
-# --- the split prototype ---------------------------------------------------------------------
+# --- extraction threads -----------------------------------------------------------------------
 
 
 @contextmanager
@@ -89,46 +82,6 @@ def cv2_threads(n: int) -> Iterator[None]:
         yield
     finally:
         cv2.setNumThreads(before)
-
-
-def extract_split(image: np.ndarray, max_width_px: int | None = None) -> Fingerprint:
-    """The product's SIFT fingerprint of an equirect panorama, extracted as two halves in two
-    threads: each half of the circularly padded (shrunk) image with the product's wrap margin of
-    overlap on both sides, keypoints kept in their own half's columns, then merged.
-
-    A prototype: the product's seam-duplicate pass and ``max_keypoints`` (not set by the ``sift``
-    preset) would have to run once on the merged keypoints, which this leaves out."""
-    overrides = {} if max_width_px is None else {"max_width_px": max_width_px}
-    kind = panorama_kind(CameraSpec(), image.shape[1], image.shape[0])
-    params = params_from_preset("sift", **{**CAMERA_DEFAULTS[kind], "camera": kind, **overrides})
-    h, w = image.shape
-    if params.max_width_px is not None and w > params.max_width_px:
-        size = (params.max_width_px, max(round(h * params.max_width_px / w), 1))
-        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-        h, w = image.shape
-    margin, half = params.wrap_margin_px, image.shape[1] // 2
-    padded = pad_circular(image, margin)
-    starts = (0, half)
-    ends = (half, w)
-    strips = [padded[:, s : e + 2 * margin] for s, e in zip(starts, ends, strict=True)]
-    strip_params = replace(params, wrap_margin_px=0, max_width_px=None)
-    parts = list(_POOL.map(functools.partial(extract, params=strip_params), strips))
-    xy, desc = [], []
-    for start, end, part in zip(starts, ends, parts, strict=True):
-        x = part.keypoints_xy[:, 0] + start - margin
-        keep = (x >= start - 0.5) & (x < end - 0.5)
-        xy.append(np.column_stack([x[keep], part.keypoints_xy[keep, 1]]))
-        desc.append(part.descriptors[keep])
-    keypoints_xy = np.concatenate(xy)
-    return Fingerprint(
-        detector="sift",
-        image_width_px=w,
-        image_height_px=h,
-        keypoints_xy=keypoints_xy,
-        bearings_rad=np.asarray(bearing_rad_from_column(keypoints_xy[:, 0], w), dtype=np.float64),
-        descriptors=np.concatenate(desc),
-        params=params.to_dict(),
-    )
 
 
 def recovered(product: Fingerprint, other: Fingerprint) -> float:
@@ -144,20 +97,19 @@ def recovered(product: Fingerprint, other: Fingerprint) -> float:
 
 class WidthLocalizer(Localizer):
     """A :class:`Localizer` whose extraction reads the panorama at ``max_width_px`` (None: the
-    product's camera default) or with the split prototype."""
+    product's camera default) on ``threads`` threads (the product's default: 2)."""
 
-    def __init__(self, loaded: LoadedMap, max_width_px: int | None, split: bool = False) -> None:
-        super().__init__(loaded)
-        self.max_width_px, self.split = max_width_px, split
+    def __init__(self, loaded: LoadedMap, max_width_px: int | None, threads: int = 2) -> None:
+        super().__init__(loaded, LocalizerConfig(extraction_threads=threads))
+        self.max_width_px = max_width_px
 
     def extract(self, image: np.ndarray) -> Fingerprint:
-        grey = to_grey(image)
-        if self.split:
-            with cv2_threads(1):
-                return extract_split(grey, self.max_width_px)
         if self.max_width_px is None:
             return super().extract(image)
-        return extract_with_camera(grey, CameraSpec(), "sift", max_width_px=self.max_width_px)
+        return extract_with_camera(
+            to_grey(image), CameraSpec(), "sift", threads=self.config.extraction_threads,
+            max_width_px=self.max_width_px,
+        )  # fmt: skip
 
 
 def extract_at_width(path: Path, max_width_px: int) -> list[Fingerprint]:
@@ -242,11 +194,11 @@ def rss_mib(field: str = "VmRSS") -> float:
 
 
 def time_map(
-    db: Path, queries: Sequence[tuple[str, str]], width: int, label: str, split: bool
+    db: Path, queries: Sequence[tuple[str, str]], width: int, label: str, threads: int
 ) -> RunResult:
     """Load the map at ``db`` and time ``observe`` on every query (path, room); the first twice."""
     loaded = load_map(db)
-    localizer = WidthLocalizer(loaded, None if width == DEFAULT_WIDTH else width, split)
+    localizer = WidthLocalizer(loaded, None if width == DEFAULT_WIDTH else width, threads)
     load_rss = rss_mib()
     images = [(read_panorama(path), room) for path, room in queries]
     localizer.observe(images[0][0])  # warm-up
@@ -273,31 +225,31 @@ def in_child(*args: Any) -> RunResult:
 
 
 def time_extraction(paths: Sequence[str], widths: Sequence[int]) -> list[str]:
-    """Rows of the extraction table: default threads, one thread, split prototype."""
+    """Rows of the extraction table: one call (OpenCV's default threads, and one OpenCV
+    thread) and the product's two halves on two threads."""
     rows = []
     for width in widths:
         over = {} if width == DEFAULT_WIDTH else {"max_width_px": width}
-        times: dict[str, list[float]] = {"default": [], "one": [], "split": []}
+        times: dict[str, list[float]] = {"default": [], "one": [], "halves": []}
         share, counts = [], []
         for path in paths:
             image = read_panorama(path)
             for name in times:  # interleaved, so background load hits all three alike
                 t0 = time.perf_counter()
                 if name == "default":
-                    product = extract_with_camera(image, CameraSpec(), "sift", **over)
+                    whole = extract_with_camera(image, CameraSpec(), "sift", **over)
                 elif name == "one":
                     with cv2_threads(1):
                         extract_with_camera(image, CameraSpec(), "sift", **over)
                 else:
-                    with cv2_threads(1):
-                        split = extract_split(image, over.get("max_width_px"))
+                    halves = extract_with_camera(image, CameraSpec(), "sift", threads=2, **over)
                 times[name].append((time.perf_counter() - t0) * 1e3)
-            share.append(recovered(product, split))
-            counts.append((product.n, split.n))
+            share.append(recovered(whole, halves))
+            counts.append((whole.n, halves.n))
         med = {k: statistics.median(v) for k, v in times.items()}
         rows.append(
-            f"| {width} | {med['default']:.0f} | {med['one']:.0f} | {med['split']:.0f} "
-            f"| {med['one'] / med['default']:.2f}x | {med['default'] / med['split']:.2f}x "
+            f"| {width} | {med['default']:.0f} | {med['one']:.0f} | {med['halves']:.0f} "
+            f"| {med['one'] / med['default']:.2f}x | {med['default'] / med['halves']:.2f}x "
             f"| {np.mean([c[0] for c in counts]):.0f} / {np.mean([c[1] for c in counts]):.0f} "
             f"| {100 * np.nanmean(share):.1f} % |"
         )
@@ -330,7 +282,9 @@ def main(argv: Sequence[str] | None = None) -> list[RunResult]:
     parser.add_argument("--full-sizes", default="30,100,300", help="map sizes timed at 2048")
     parser.add_argument("--queries", type=int, default=20)
     parser.add_argument("--extraction-images", type=int, default=0, help="0: every query")
-    parser.add_argument("--split-size", type=int, default=100, help="0: no split row")
+    parser.add_argument(
+        "--one-thread-size", type=int, default=100, help="0: no one-thread extraction row"
+    )
     parser.add_argument(
         "--cache-dir", type=Path, default=Path(tempfile.gettempdir()) / "toploc-bench-realres"
     )
@@ -357,9 +311,9 @@ def main(argv: Sequence[str] | None = None) -> list[RunResult]:
         maps = build_maps(entries, timed, width, args.cache_dir)
         for size, db in maps.items():
             print(f"  timing {size} places at {width} ...", flush=True)
-            results.append(in_child(db, queries, width, f"{width}", False))
-            if size == args.split_size:
-                results.append(in_child(db, queries, width, f"{width} split", True))
+            results.append(in_child(db, queries, width, f"{width}", 2))
+            if size == args.one_thread_size:
+                results.append(in_child(db, queries, width, f"{width}, 1 thread", 1))
 
     print(f"\nload after: {os.getloadavg()}")
     print(
@@ -374,12 +328,12 @@ def main(argv: Sequence[str] | None = None) -> list[RunResult]:
     print("\n".join(result_row(r) for r in results))
     n_extracted = min(args.extraction_images or len(queries), len(queries))
     print(
-        f"\nSIFT extraction of {n_extracted} queries, median ms (OpenCV's default threads, "
-        "1 thread, split halves in 2 threads)\n"
+        f"\nSIFT extraction of {n_extracted} queries, median ms (one call with OpenCV's "
+        "default threads, one call with 1 thread, the product's two halves on 2 threads)\n"
     )
     print(
-        "| read at | default threads | 1 thread | split, 2 threads | 1 thread / default "
-        "| split speed-up vs default | keypoints product / split | product keypoints found |"
+        "| read at | one call | one call, 1 thread | halves, 2 threads | 1 thread / one call "
+        "| halves speed-up vs one call | keypoints one call / halves | one call's found |"
     )
     print("|" + "---|" * 8)
     print("\n".join(extraction_rows))

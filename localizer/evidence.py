@@ -15,6 +15,7 @@ extraction parameters); its keypoints' rays are computed once per map
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,9 @@ class EvidenceParams:
     RANSAC's seed. ``max_trials``: RANSAC's iteration cap per place. ``motion``: the relative
     pose model, ``"general"`` or ``"planar"`` (:class:`~localizer.verification.VerificationParams`),
     or ``"auto"``: the one the map's calibration chose (:mod:`localizer.calibration`), general
-    for a map without one.
+    for a map without one. ``threads``: candidates matched and verified at once (OpenCV's
+    matcher and pycolmap's RANSAC release the GIL; each candidate's result does not depend on
+    the others or on the order, so the evidence is the same with any count).
     """
 
     ratio: float = DEFAULT_RATIO
@@ -46,8 +49,9 @@ class EvidenceParams:
     max_error_rad: float = 0.01
     shortlist: int = 10
     seed: int = 0
-    max_trials: int = 1000
+    max_trials: int = 300
     motion: str = "auto"
+    threads: int = 2
 
     def __post_init__(self) -> None:
         if not 0 < self.ratio <= 1:
@@ -60,6 +64,8 @@ class EvidenceParams:
             raise ValueError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
         if self.shortlist < 1:
             raise ValueError(f"shortlist must be >= 1, got {self.shortlist!r}")
+        if self.threads < 1:
+            raise ValueError(f"threads must be >= 1, got {self.threads!r}")
         self.verification()  # validates max_error_rad, seed and max_trials
 
     def verification(self) -> VerificationParams:
@@ -180,9 +186,15 @@ def place_evidence(
         candidates = index.shortlist(query.descriptors, params.shortlist, left_out)
     t1 = time.perf_counter()
     query_rays = rays_from_fingerprint(query)
-    evidence = [
-        evaluate_place(query, query_rays, table, table_rays, int(i), params) for i in candidates
-    ]
+
+    def evaluate(i: np.integer) -> PlaceEvidence:
+        return evaluate_place(query, query_rays, table, table_rays, int(i), params)
+
+    if params.threads == 1 or len(candidates) < 2:
+        evidence = [evaluate(i) for i in candidates]
+    else:
+        with ThreadPoolExecutor(min(params.threads, len(candidates))) as pool:
+            evidence = list(pool.map(evaluate, candidates))
     t2 = time.perf_counter()
     evidence.sort(key=lambda e: (-e.inliers, -e.matches, e.place_id))
     timing = {"retrieval": (t1 - t0) * 1e3 if index is not None else 0.0}

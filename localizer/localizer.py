@@ -28,8 +28,10 @@ from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
 
-# Below this many places brute force verifies every place anyway: an index would not save time.
-INDEX_MIN_PLACES = 32
+# From this many places (twice the default shortlist) the index pays: verifying all 30 places of
+# a 30-place map took 159 ms per query against 55 ms for the shortlist of 10 at 100 places
+# (benchmarks/bench_real_resolution.py); below it there is little to leave out.
+INDEX_MIN_PLACES = 20
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,8 @@ class LocalizerConfig:
     ``stay_probability``: per move, the chance of staying in the same room (the prediction
     along the room graph). ``likelihood``: how a frame's evidence weighs the rooms (None: the
     map's calibration, else :class:`~localizer.likelihood.RatioLikelihood`'s defaults); its
-    ``min_inliers`` is also the ``lost`` test.
+    ``min_inliers`` is also the ``lost`` test. ``extraction_threads``: a query panorama's halves
+    are detected on this many threads (:func:`localizer.features.extract`; 1: one call).
     """
 
     detector: str = "sift"
@@ -53,6 +56,7 @@ class LocalizerConfig:
     stay_probability: float = 0.8
     use_index: bool | None = None
     camera: CameraSpec = field(default_factory=CameraSpec)
+    extraction_threads: int = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,7 +181,12 @@ class Localizer:
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read
         through the configured camera model."""
-        return extract_with_camera(to_grey(image), self.config.camera, self.config.detector)
+        return extract_with_camera(
+            to_grey(image),
+            self.config.camera,
+            self.config.detector,
+            threads=self.config.extraction_threads,
+        )
 
     def observe(self, image: np.ndarray) -> Observation:
         """Extract and gather evidence against the map; the belief is not changed."""

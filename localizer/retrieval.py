@@ -13,6 +13,7 @@ win on the count of their chance hits. The ``k`` best scores are the shortlist.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -27,16 +28,18 @@ FLANN_INDEX_KDTREE = 1
 class IndexParams:
     """FLANN and voting settings: ``trees`` in the kd forest, ``checks`` leaves searched per
     query descriptor, ``neighbours`` looked up per query descriptor, ``max_distance_ratio``
-    (neighbours up to this multiple of the nearest distance vote)."""
+    (neighbours up to this multiple of the nearest distance vote), ``threads`` searching the
+    query's descriptors at once."""
 
     trees: int = 4
     checks: int = 64
     neighbours: int = 8
     max_distance_ratio: float = 1.25
+    threads: int = 2
 
     def __post_init__(self) -> None:
-        if self.trees < 1 or self.checks < 1 or self.neighbours < 1:
-            raise ValueError(f"trees, checks and neighbours must be >= 1, got {self}")
+        if min(self.trees, self.checks, self.neighbours, self.threads) < 1:
+            raise ValueError(f"trees, checks, neighbours and threads must be >= 1, got {self}")
         if not self.max_distance_ratio >= 1:
             raise ValueError(f"max_distance_ratio must be >= 1, got {self.max_distance_ratio!r}")
 
@@ -97,11 +100,7 @@ class PlaceIndex:
             )
         k = min(self.params.neighbours, len(self._descriptors))
         k_search = min(2 * k if exclude is not None else k, len(self._descriptors))
-        rows, dist_sq = self._flann.knnSearch(
-            np.ascontiguousarray(descriptors), k_search, params={"checks": self.params.checks}
-        )
-        rows = rows.reshape(len(descriptors), k_search)
-        dist_sq = dist_sq.reshape(len(descriptors), k_search).astype(np.float64)
+        rows, dist_sq = self._search(np.ascontiguousarray(descriptors), k_search)
         if exclude is not None:
             dropped = (rows < 0) | (self._keypoint_place[np.maximum(rows, 0)] == exclude)
             dist_sq = np.where(dropped, np.inf, dist_sq)
@@ -118,6 +117,25 @@ class PlaceIndex:
         places_hit = np.bincount(hit_query, minlength=len(descriptors))
         np.add.at(scores, hit_place, 1.0 / places_hit[hit_query])
         return scores * self._weights
+
+    def _search(self, descriptors: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(rows, dist_sq)`` (n, k) of the ``k`` approximate nearest map descriptors of each
+        row of ``descriptors``; the rows split over ``params.threads`` threads (the search is
+        read-only and releases the GIL, and each row's neighbours do not depend on the split)."""
+        assert self._flann is not None
+        flann = self._flann
+
+        def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            rows, dist_sq = flann.knnSearch(part, k, params={"checks": self.params.checks})
+            return rows.reshape(len(part), k), dist_sq.reshape(len(part), k).astype(np.float64)
+
+        threads = min(self.params.threads, len(descriptors))
+        if threads <= 1:
+            return search(descriptors)
+        parts = np.array_split(descriptors, threads)
+        with ThreadPoolExecutor(threads) as pool:
+            found = list(pool.map(search, parts))
+        return np.vstack([r for r, _ in found]), np.vstack([d for _, d in found])
 
     def shortlist(self, descriptors: np.ndarray, k: int, exclude: int | None = None) -> np.ndarray:
         """Indices into the table's places of the ``k`` best-voted places, best first.

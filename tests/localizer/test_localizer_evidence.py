@@ -122,3 +122,17 @@ def test_params_are_validated() -> None:
     with pytest.raises(ValueError, match="max_error_rad"):
         EvidenceParams(max_error_rad=0.0)
     assert isinstance(PlaceEvidence(1, "a", 0, 0, float("nan"), np.zeros((0, 2))), PlaceEvidence)
+
+
+def test_candidates_on_two_threads_give_the_same_evidence(
+    square: Square, square_table: FingerprintTable
+) -> None:
+    query = square.fingerprint(2.0, 1.5, 40.0, condition="dim")
+    one = place_evidence(query, square_table, EvidenceParams(threads=1)).places
+    two = place_evidence(query, square_table, EvidenceParams(threads=2)).places
+    assert [(e.place_id, e.matches, e.inliers) for e in one] == [
+        (e.place_id, e.matches, e.inliers) for e in two
+    ]
+    np.testing.assert_array_equal([e.yaw_rad for e in one], [e.yaw_rad for e in two])
+    with pytest.raises(ValueError, match="threads"):
+        EvidenceParams(threads=0)

@@ -124,3 +124,14 @@ def test_index_shortlist_contains_brute_force_winner(corridor) -> None:
         assert indexed.best is not None and indexed.best.place_id == brute.best.place_id
         assert indexed.best.inliers == brute.best.inliers  # same seed, same pairs
         assert indexed.timing_ms["retrieval"] > 0
+
+
+def test_searching_on_two_threads_gives_the_same_scores() -> None:
+    rng = np.random.default_rng(4)
+    table = random_table(rng, [80, 200, 120, 60, 150, 90])
+    query = table.descriptors[::3] + rng.normal(0, 0.05, table.descriptors[::3].shape)
+    one = PlaceIndex.build(table, IndexParams(threads=1)).scores(query.astype(np.float32))
+    two = PlaceIndex.build(table, IndexParams(threads=2)).scores(query.astype(np.float32))
+    np.testing.assert_array_equal(one, two)
+    with pytest.raises(ValueError, match="threads"):
+        IndexParams(threads=0)
