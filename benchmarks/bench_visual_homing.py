@@ -1,13 +1,18 @@
-"""Benchmark: closed-loop visual homing on rendered panoramas, "thesis" against "best".
+"""Benchmark: closed-loop visual homing on rendered panoramas, the variants of
+:data:`localizer.visual_homing.VARIANTS` ("thesis", "best", "pose").
 
-Run: ``python benchmarks/bench_visual_homing.py [--quick] [--per-run]``. For each room (the
-``square`` world's room, and ``office_a`` of the ``building`` world) the goal is the capture place
+Run: ``python benchmarks/bench_visual_homing.py [--quick] [--per-run] [--rooms WORLD:ROOM:RUNS,...]
+[--variants thesis,best,pose] [--projection cylinder|equirect]``. For each room (by default the
+``square`` world's room, ``office_a`` of the ``building`` world and the bare ``living`` room of
+the ``house``) the goal is the capture place
 nearest the room's centre, photographed at heading 0 like a map panorama; the robot is kidnapped
 to seeded random free poses in the room (random headings, 5 % motion noise) and homes with
 :func:`localizer.visual_homing.drive_home` on SIFT fingerprints. Prints a markdown table: the
 final true distance to the goal, the share of runs ending within 0.3 m, how often the robot
 *said* it arrived, the moves made and the true distance driven per metre of start distance.
-``--quick``: 512 x 96 panoramas and 3 starts in the square room only.
+``--quick``: 512 x 96 panoramas and 3 starts in the square room only. ``--projection
+equirect``: 1024 x 512 equirectangular panoramas read as spheres (the floor and ceiling in view,
+as a 360° camera sees them); the default is the 1024 x 192 cylinder.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from localizer.cameras import CameraSpec
 from localizer.visual_homing import VARIANTS, HomingParams, StepParams, drive_home, grey_extractor
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
@@ -54,7 +60,7 @@ def goal_pose(world: World, room: str) -> Pose2D:
 def run_room(
     world: World, room: str, seeds: range, camera: PanoramaCamera, variant: str
 ) -> list[Run]:
-    extract = grey_extractor("sift")
+    extract = grey_extractor("sift", CameraSpec() if camera.projection == "equirect" else None)
     goal = goal_pose(world, room)
     goal_fp = extract(SimulatedRobot(world, goal, camera=camera, grey=True).capture().image)
     params = HomingParams(step=StepParams(variant))  # type: ignore[arg-type]
@@ -100,15 +106,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="512 x 96, 3 starts, square only")
     parser.add_argument("--per-run", action="store_true", help="also print every run")
+    parser.add_argument(
+        "--rooms",
+        default="square:square:10,building:office_a:4,house:living:6",
+        help="WORLD:ROOM:RUNS, comma-separated",
+    )
+    parser.add_argument("--variants", default=",".join(VARIANTS))
+    parser.add_argument("--projection", choices=("cylinder", "equirect"), default="cylinder")
     args = parser.parse_args()
-    camera = PanoramaCamera(512, 96) if args.quick else PanoramaCamera(1024, 192)
-    rooms = [("square", "square", range(3 if args.quick else 10))]
-    if not args.quick:
-        rooms.append(("building", "office_a", range(4)))
+    if args.quick:
+        camera = PanoramaCamera(512, 96)
+    elif args.projection == "equirect":
+        camera = PanoramaCamera(1024, 512, projection="equirect")
+    else:
+        camera = PanoramaCamera(1024, 192)
+    rooms = [(w, r, range(int(n))) for w, r, n in (x.split(":") for x in args.rooms.split(","))]
+    if args.quick:
+        rooms = [("square", "square", range(3))]
     runs: list[list[Run]] = []
     for world_name, room, seeds in rooms:
         world = make_world(world_name, 0)
-        for variant in VARIANTS:
+        for variant in args.variants.split(","):
             runs.append(run_room(world, room, seeds, camera, variant))
     print(f"Visual homing, {camera.width_px}x{camera.height_px}, SIFT, 5 % motion noise\n")
     print(

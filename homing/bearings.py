@@ -78,3 +78,27 @@ def column_shift_px(delta_bearing_rad: float, width_px: int) -> float:
     """
     check_width_px(width_px)
     return -float(delta_bearing_rad) * width_px / TWO_PI
+
+
+def mean_direction_rad(*directions_rad: ArrayLike) -> np.ndarray:
+    """Element-wise circular mean of the directions (radians): the direction of the sum of their
+    unit vectors, NaN ones left out; NaN where all are NaN or the vectors cancel."""
+    stacked = np.asarray(np.broadcast_arrays(*directions_rad), dtype=float)
+    known = np.isfinite(stacked)
+    c = np.where(known, np.cos(stacked), 0.0).sum(axis=0)
+    s = np.where(known, np.sin(stacked), 0.0).sum(axis=0)
+    return np.where(np.hypot(c, s) > 1e-9, np.arctan2(s, c), np.nan)
+
+
+def signed_axis_rad(axis_rad: ArrayLike, reference_rad: ArrayLike) -> np.ndarray:
+    """``axis_rad`` or its opposite, whichever lies within 90° of ``reference_rad``;
+    ``reference_rad`` itself where the axis is NaN (radians, the same frame, wrapped).
+
+    For a direction known up to its sign (the axis of an essential matrix's translation),
+    signed by a rougher estimate of the same direction.
+    """
+    axis = np.asarray(axis_rad, dtype=float)
+    reference = np.asarray(reference_rad, dtype=float)
+    opposite = np.cos(axis - reference) < 0.0
+    signed = wrap_angle_rad(np.where(opposite, axis + np.pi, axis))
+    return np.where(np.isnan(axis), reference, signed)

@@ -292,6 +292,38 @@ def above_floor(
     return matches[keep]
 
 
+def cheirality_sign(
+    verification: Verification,
+    query_rays: np.ndarray,
+    place_rays: np.ndarray,
+    min_elevation_deg: float = FLOOR_ELEVATION_DEG,
+) -> int:
+    """+1 when more of the inliers above ``min_elevation_deg`` (degrees, in both panoramas)
+    triangulate in front of both cameras than behind both with ``translation_dir`` as it is,
+    -1 when fewer (the opposite translation fits them better); over all inliers if that ties,
+    and +1 if that ties too. 0 without geometry. Rays as for :func:`verify`.
+
+    The floor is left out of this count only: a floor texture that repeats about once per place
+    spacing gives matches that fit the epipolar geometry with the wrong sign of parallax and
+    outvote the walls (the rendered house), while its matches still pin the axis down.
+    """
+    R, t = verification.rotation, verification.translation_dir
+    if R is None or t is None or len(verification.inlier_pairs) == 0:
+        return 0
+    x_query = query_rays[verification.inlier_pairs[:, 0]]
+    x_place = place_rays[verification.inlier_pairs[:, 1]]
+    depth_place, depth_query = triangulated_depths(x_place @ R.T, x_query, t)
+    margin = ((depth_place > 0) & (depth_query > 0)).astype(int) - (
+        (depth_place < 0) & (depth_query < 0)
+    ).astype(int)
+    z_min = math.sin(math.radians(min_elevation_deg))
+    above = (x_query[:, 2] > z_min) & (x_place[:, 2] > z_min)
+    for votes in (margin[above], margin):
+        if votes.sum() != 0:
+            return 1 if votes.sum() > 0 else -1
+    return 1
+
+
 def home_direction_rad(verification: Verification, min_inliers: int = 1) -> float:
     """Direction (rad, CCW from the query's heading, (-pi, pi]) from the query to the place on
     the floor: the azimuth of ``translation_dir`` (see the module docstring). NaN when no

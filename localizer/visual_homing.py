@@ -14,6 +14,14 @@ to go but is not metres). Two variants:
   inliers' circular mean (:func:`homing.compass.matched_shift_rad`) refines it; the ALV is taken
   over the inliers only, in both views (the same landmarks here and at the goal):
   :func:`homing.alv.matched_home_vector`.
+- ``"pose"``: the direction from the relative pose that the localizer's verification finds on
+  the same descriptor matches (:func:`localizer.verification.verify`): the axis of its
+  translation, which is precise, with the sign most of three votes give: the pose's
+  cheirality counted on the inliers above the floor, the matched ALV and the ALV of all
+  features with the pose's yaw as the compass
+  (:func:`signed_pose_direction_rad`; ``toploc eval homing --method pose-vote``). The step
+  length and the arrival test are the matched ALV's, as for "best"; without geometry the
+  step is "best"'s.
 
 The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
 extract, step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
@@ -44,17 +52,21 @@ import cv2
 import numpy as np
 
 from homing.alv import HomingError, alv_from_bearings, home_vector, matched_home_vector
-from homing.bearings import wrap_angle_rad
+from homing.bearings import mean_direction_rad, wrap_angle_rad
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
-from localizer.features import extract_preset
+from homing.evaluation import alv_home_directions_rad
+from localizer.cameras import CameraSpec
+from localizer.features import extract_preset, extract_with_camera
 from localizer.matching import match_descriptors
+from localizer.rays import rays_from_fingerprint
+from localizer.verification import Verification, cheirality_sign, home_direction_rad, verify
 from mapdb.records import Fingerprint
 
 if TYPE_CHECKING:  # the protocol only: localizer does not depend on a robot implementation
     from localizer.robot_protocol import Robot
 
-HomingVariant = Literal["thesis", "best"]
-VARIANTS: tuple[str, ...] = ("thesis", "best")
+HomingVariant = Literal["thesis", "best", "pose"]
+VARIANTS: tuple[str, ...] = ("thesis", "best", "pose")
 
 
 @dataclass(frozen=True)
@@ -132,11 +144,17 @@ def _thesis_step(
 
 
 def matched_inliers(
-    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None = None
+    current: Fingerprint,
+    goal: Fingerprint,
+    params: StepParams,
+    shift_rad: float | None = None,
+    pairs: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """Descriptor matches ``(k, 2)`` [current_row, goal_row] consistent with one rotation, and
-    that rotation (radians, goal -> current bearings; ``shift_rad`` if known, else estimated)."""
-    pairs = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
+    that rotation (radians, goal -> current bearings; ``shift_rad`` if known, else estimated).
+    ``pairs``: the descriptor matches if already made (else they are made here)."""
+    if pairs is None:
+        pairs = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
     if len(pairs) < params.min_matches:
         raise HomingError(f"only {len(pairs)} descriptor matches (need {params.min_matches})")
     here = current.bearings_rad[pairs[:, 0]]
@@ -152,9 +170,13 @@ def matched_inliers(
 
 
 def _best_step(
-    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
+    current: Fingerprint,
+    goal: Fingerprint,
+    params: StepParams,
+    shift_rad: float | None,
+    matches: np.ndarray | None = None,
 ) -> HomeStep:
-    pairs, shift = matched_inliers(current, goal, params, shift_rad)
+    pairs, shift = matched_inliers(current, goal, params, shift_rad, matches)
     here = current.bearings_rad[pairs[:, 0]]
     there = goal.bearings_rad[pairs[:, 1]]
     home = matched_home_vector(here, there, shift)
@@ -162,6 +184,63 @@ def _best_step(
         raise HomingError(f"no home vector from {len(pairs)} inliers and rotation {shift} rad")
     parallax = float(np.median(np.abs(wrap_angle_rad(here - there - shift))))
     return HomeStep(home, shift, len(pairs), parallax)
+
+
+def signed_pose_direction_rad(
+    verification: Verification,
+    matched_rad: float,
+    alv_here: np.ndarray,
+    alv_home: np.ndarray,
+    cheirality: int,
+) -> float:
+    """The home direction of the "pose" variant (rad, current robot frame, (-pi, pi]).
+
+    The axis of ``verification``'s translation (query: here, place: home) with the sign that
+    most of three votes give: ``cheirality`` (+1: the translation as it is, -1: its opposite;
+    :func:`localizer.verification.cheirality_sign`), ``matched_rad`` (the matched-ALV
+    direction; no vote if NaN) and the ALV home vector of all features (``alv_here``,
+    ``alv_home`` (2,), each in its own robot frame) rotated by the pose's yaw; an ALV votes
+    for the side of the axis it lies on. Each vote fails somewhere else: the cheirality where a
+    repeating floor texture outvotes the walls, the ALV of all features where they are unevenly
+    spread (the tiled square room), the matched ALV with few matches. Without geometry: the
+    circular mean of the two ALV directions; NaN if neither exists.
+    """
+    alv_dir_rad = math.nan
+    if math.isfinite(verification.yaw_rad):
+        alv_dir_rad = float(
+            alv_home_directions_rad(
+                np.asarray(alv_here, dtype=float)[None, :2],
+                np.asarray(alv_home, dtype=float)[None, :2],
+                np.array([-verification.yaw_rad]),
+            )[0]
+        )
+    axis_rad = home_direction_rad(verification)
+    if math.isnan(axis_rad):
+        return float(mean_direction_rad(matched_rad, alv_dir_rad))
+    rough = [d for d in (matched_rad, alv_dir_rad) if math.isfinite(d)]
+    votes = cheirality + sum(float(np.sign(math.cos(d - axis_rad))) for d in rough)
+    return float(wrap_angle_rad(axis_rad + math.pi)) if votes < 0 else axis_rad
+
+
+def _pose_step(
+    current: Fingerprint, goal: Fingerprint, params: StepParams, shift_rad: float | None
+) -> HomeStep:
+    matches = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
+    matched = _best_step(current, goal, params, shift_rad, matches)
+    rays_here, rays_goal = rays_from_fingerprint(current), rays_from_fingerprint(goal)
+    verification = verify(rays_here, rays_goal, matches)
+    direction = signed_pose_direction_rad(
+        verification,
+        matched.direction_rad,
+        alv_from_bearings(current.bearings_rad),
+        alv_from_bearings(goal.bearings_rad),
+        cheirality_sign(verification, rays_here, rays_goal),
+    )
+    if not math.isfinite(verification.yaw_rad):
+        return matched
+    home = matched.length * np.array([math.cos(direction), math.sin(direction)])
+    shift = -verification.yaw_rad if shift_rad is None else shift_rad
+    return HomeStep(home, shift, matched.n_used, matched.parallax_rad)
 
 
 def home_step(
@@ -184,6 +263,8 @@ def home_step(
         raise ValueError(f"detectors differ: current {current.detector!r}, goal {goal.detector!r}")
     if params.variant == "thesis":
         return _thesis_step(current, goal, params, shift_rad)
+    if params.variant == "pose":
+        return _pose_step(current, goal, params, shift_rad)
     return _best_step(current, goal, params, shift_rad)
 
 
@@ -245,11 +326,20 @@ class HomingProgress:
     home: HomeStep | None
 
 
-def grey_extractor(preset: str = "sift") -> Callable[[np.ndarray], Fingerprint]:
-    """An ``extract`` for :func:`drive_home`: BGR or grey uint8 panorama -> fingerprint."""
+def grey_extractor(
+    preset: str = "sift", camera: CameraSpec | None = None
+) -> Callable[[np.ndarray], Fingerprint]:
+    """An ``extract`` for :func:`drive_home`: BGR or grey uint8 panorama -> fingerprint.
+
+    ``camera``: read the image through that camera model
+    (:func:`localizer.features.extract_with_camera`; ``CameraSpec()`` reads a 2:1 image as
+    equirectangular); None extracts on the whole image as a cylinder (``extract_preset``).
+    """
 
     def extract(image: np.ndarray) -> Fingerprint:
         grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+        if camera is not None:
+            return extract_with_camera(grey, camera, preset)
         return extract_preset(grey, preset)
 
     return extract

@@ -13,6 +13,8 @@ from homing.bearings import (
     bearing_rad_from_column,
     column_from_bearing,
     column_shift_px,
+    mean_direction_rad,
+    signed_axis_rad,
     wrap_angle_deg,
     wrap_angle_rad,
 )
@@ -83,3 +85,37 @@ def test_wrap_ranges_are_half_open_above() -> None:
     assert wrap_angle_rad(np.pi) == np.pi
     assert wrap_angle_rad(3 * np.pi) == pytest.approx(np.pi)
     assert np.isnan(wrap_angle_rad(np.nan))
+
+
+angles = st.floats(min_value=-10.0, max_value=10.0)
+
+
+@given(axis=angles, reference=angles)
+def test_signed_axis_is_the_axis_either_way_within_90_deg_of_the_reference(axis, reference):
+    signed = float(signed_axis_rad(axis, reference))
+    assert -np.pi < signed <= np.pi
+    either_way = [circular_diff(signed, a, 2 * np.pi) for a in (axis, axis + np.pi)]
+    assert min(either_way) < 1e-9
+    assert circular_diff(signed, reference, 2 * np.pi) <= np.pi / 2 + 1e-9
+
+
+def test_signed_axis_without_an_axis_is_the_reference() -> None:
+    np.testing.assert_allclose(signed_axis_rad([np.nan, 0.2], [1.0, 0.5]), [1.0, 0.2])
+    np.testing.assert_allclose(signed_axis_rad(0.2, 0.2 + np.pi - 0.3), 0.2 - np.pi)
+
+
+@given(direction=angles)
+def test_mean_direction_of_one_direction_or_twice_the_same_is_itself(direction: float) -> None:
+    assert circular_diff(mean_direction_rad(direction), direction, 2 * np.pi) < 1e-9
+    assert circular_diff(mean_direction_rad(direction, direction), direction, 2 * np.pi) < 1e-9
+
+
+def test_mean_direction_bisects_across_the_seam_and_leaves_out_nan() -> None:
+    assert mean_direction_rad(np.pi - 0.1, -np.pi + 0.3) == pytest.approx(-np.pi + 0.1)
+    assert mean_direction_rad(np.nan, 0.4) == pytest.approx(0.4)
+    np.testing.assert_allclose(mean_direction_rad([0.0, 1.0], [0.5, np.nan]), [0.25, 1.0])
+
+
+def test_mean_direction_of_opposites_or_nothing_is_nan() -> None:
+    assert np.isnan(mean_direction_rad(0.3, 0.3 + np.pi))
+    assert np.isnan(mean_direction_rad(np.nan, np.nan))

@@ -219,3 +219,47 @@ def test_above_floor_keeps_the_matches_whose_rays_both_clear_the_floor_band():
     kept = above_floor(rays, rays, matches, min_elevation_deg=-25.0)
     np.testing.assert_array_equal(kept, [[1, 2], [3, 3]])
     assert above_floor(rays, rays, matches[:0]).shape == (0, 2)
+
+
+def test_cheirality_sign_says_which_way_the_translation_fits() -> None:
+    from dataclasses import replace
+
+    from localizer.verification import cheirality_sign
+
+    query, place, pairs = two_views(np.random.default_rng(5), 120, 0.4, np.array([1.0, 0.5, 0.0]))
+    result = verify(query, place, pairs, VerificationParams(seed=0))
+    assert cheirality_sign(result, query, place) == 1
+    flipped = replace(result, translation_dir=-result.translation_dir)
+    assert cheirality_sign(flipped, query, place) == -1
+    assert cheirality_sign(Verification.none(), query, place) == 0
+
+
+def test_cheirality_sign_is_counted_above_the_floor() -> None:
+    """Floor matches that fit the opposite translation (aliased planks) outnumber the walls'
+    but do not set the sign; counted over every elevation they would."""
+    from localizer.verification import cheirality_sign
+
+    rng = np.random.default_rng(6)
+    t_query = np.array([0.8, -0.3, 0.0])
+    n_wall, n_floor = 20, 60
+    wall = np.column_stack(
+        [rng.uniform(-4, 4, n_wall), rng.choice([-4.0, 4.0], n_wall), rng.uniform(0.0, 1.2, n_wall)]
+    )
+    floor = np.column_stack(
+        [rng.uniform(-2, 2, n_floor), rng.uniform(-2, 2, n_floor), np.full(n_floor, -1.4)]
+    )
+    floor[np.linalg.norm(floor[:, :2], axis=1) < 0.5, :2] += 1.0
+
+    def rays(points: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        at_place = points / np.linalg.norm(points, axis=1, keepdims=True)
+        at_query = points - t
+        return at_query / np.linalg.norm(at_query, axis=1, keepdims=True), at_place
+
+    wall_q, wall_p = rays(wall, t_query)
+    floor_q, floor_p = rays(floor, -t_query)  # parallax of the wrong sign
+    query, place = np.vstack([wall_q, floor_q]), np.vstack([wall_p, floor_p])
+    home = -t_query / np.linalg.norm(t_query)  # query frame = place frame here (no yaw)
+    pairs = np.column_stack([np.arange(len(query)), np.arange(len(query))])
+    truth = Verification(len(query), pairs, 0.0, np.eye(3), home)
+    assert cheirality_sign(truth, query, place) == 1
+    assert cheirality_sign(truth, query, place, min_elevation_deg=-90.0) == -1

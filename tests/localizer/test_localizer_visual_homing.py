@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from homing.alv import HomingError
+from homing.alv import HomingError, alv_from_bearings
 from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.verification import Verification
 from localizer.visual_homing import (
     HomingParams,
     HomingProgress,
@@ -17,6 +18,7 @@ from localizer.visual_homing import (
     drive_home,
     grey_extractor,
     home_step,
+    signed_pose_direction_rad,
 )
 from mapdb.records import Fingerprint
 from robot.render import PanoramaCamera
@@ -242,7 +244,8 @@ def test_drive_home_stops_blocked_behind_a_wall():
     assert robot.pose.x_m <= 2.5 + 1e-9
 
 
-def test_drive_home_in_the_rendered_square_room():
+@pytest.mark.parametrize("variant", ["best", "pose"])
+def test_drive_home_in_the_rendered_square_room(variant):
     """Closed loop on 512 x 96 renders from 1.5 m away: ends within 0.3 m of the goal."""
     world = make_world("square", 0)
     camera = PanoramaCamera(512, 96)
@@ -250,7 +253,54 @@ def test_drive_home_in_the_rendered_square_room():
     extract = grey_extractor("sift")
     goal_fp = extract(SimulatedRobot(world, goal, camera=camera, grey=True).capture().image)
     robot = SimulatedRobot(world, Pose2D(1.2, 2.6, 2.0), camera=camera, grey=True)
-    result = drive_home(robot, goal_fp, extract)
+    result = drive_home(robot, goal_fp, extract, HomingParams(step=StepParams(variant)))
     end = robot.true_pose
     assert math.hypot(end.x_m - goal.x_m, end.y_m - goal.y_m) < 0.3, result
     assert result.arrived
+
+
+def _verification(yaw_rad: float, direction_rad: float) -> Verification:
+    """A verified pose whose translation points along ``direction_rad`` (query frame)."""
+    t = np.array([math.cos(direction_rad), math.sin(direction_rad), 0.0])
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # R_query_from_place
+    return Verification(40, np.zeros((40, 2), dtype=np.int64), yaw_rad, rotation, t)
+
+
+def _pose_case() -> tuple[float, float, np.ndarray, np.ndarray]:
+    """A landmark world's home direction, the yaw between the views and their ALVs (all
+    landmarks in view: the ALV home vector lies within 90 degrees of home)."""
+    world, home, here = next(_cases(3))
+    yaw = math.remainder(here.heading_rad - home.heading_rad, 2 * math.pi)
+    alv_here = alv_from_bearings(world.fingerprint(here).bearings_rad)
+    alv_home = alv_from_bearings(world.fingerprint(home).bearings_rad)
+    return _true_direction_rad(here, home), yaw, alv_here, alv_home
+
+
+def test_pose_direction_follows_the_cheirality_and_one_alv_against_the_other():
+    truth, yaw, alv_here, alv_home = _pose_case()
+    wrong_way = _verification(yaw, truth + math.pi)
+    # the all-feature ALV (right here) and a cheirality vote for -t outvote the matched ALV
+    direction = signed_pose_direction_rad(wrong_way, truth + math.pi, alv_here, alv_home, -1)
+    assert _angle_error_deg(direction, truth) < 1e-6
+
+
+def test_pose_direction_flips_an_axis_that_both_alvs_contradict():
+    truth, yaw, alv_here, alv_home = _pose_case()
+    wrong_way = _verification(yaw, truth + math.pi + 0.01)  # cheirality on the wrong side
+    direction = signed_pose_direction_rad(wrong_way, truth + 0.3, alv_here, alv_home, 1)
+    assert _angle_error_deg(direction, truth) == pytest.approx(math.degrees(0.01), abs=1e-6)
+
+
+def test_pose_direction_keeps_the_axis_the_alvs_agree_with():
+    truth, yaw, alv_here, alv_home = _pose_case()
+    right_way = _verification(yaw, truth - 0.02)
+    direction = signed_pose_direction_rad(right_way, truth - 0.4, alv_here, alv_home, 1)
+    assert _angle_error_deg(direction, truth) == pytest.approx(math.degrees(0.02), abs=1e-6)
+
+
+def test_pose_direction_without_geometry_is_the_matched_direction():
+    direction = signed_pose_direction_rad(Verification.none(), 1.2, np.ones(2), np.zeros(2), 0)
+    assert direction == pytest.approx(1.2)
+    nothing = signed_pose_direction_rad(Verification.none(), math.nan, np.ones(2), np.ones(2), 0)
+    assert math.isnan(nothing)

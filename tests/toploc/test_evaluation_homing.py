@@ -22,6 +22,7 @@ from toploc.evaluation.homing import (
     COMPASSES,
     EvaluationError,
     FeatureSettings,
+    PairCache,
     evaluate_alignment,
     evaluate_homing,
     extract_fingerprints,
@@ -59,7 +60,8 @@ def test_same_room_pairs_never_cross_rooms() -> None:
 
 @pytest.mark.parametrize("detector", ["sift", "mser"])
 @pytest.mark.parametrize(
-    "method", ["thesis", "best", "alv-compass", "matched-vote", "pose-above-floor"]
+    "method",
+    ["thesis", "best", "alv-compass", "matched-vote", "pose-above-floor", "pose-compass"],
 )
 def test_every_ordered_pair_is_evaluated(dataset, fingerprints, detector, method) -> None:
     places = load_places(dataset)
@@ -233,8 +235,6 @@ def test_pose_method_homes_and_falls_back(dataset, fingerprints) -> None:
 
 
 def test_methods_share_one_cache(dataset, fingerprints) -> None:
-    from toploc.evaluation.homing import PairCache
-
     places = load_places(dataset)
     cache = PairCache(fingerprints["sift"])
     a = evaluate_homing(places, fingerprints["sift"], "pose", cache=cache)
@@ -288,21 +288,27 @@ def test_cli_homing_on_equirect_with_several_methods(equirect_dataset: Path, tmp
     assert camera.exit_code == 2 and "camera" in camera.output
 
 
-def test_pose_alv_signs_the_axis_by_the_matched_alv() -> None:
-    from toploc.evaluation.homing import _signed_axis
-
-    axis = np.array([0.2, 0.2, np.pi - 0.1, np.nan])
-    reference = np.array([0.5, 0.2 + np.pi - 0.3, 0.0, 1.0])
-    np.testing.assert_allclose(_signed_axis(axis, reference), [0.2, 0.2 - np.pi, -0.1, 1.0])
-
-
-def test_pose_alv_is_best_and_homes(dataset, fingerprints) -> None:
+def test_pose_vote_is_best_and_homes(dataset, fingerprints) -> None:
     from toploc.evaluation.homing import BEST_METHOD
 
-    assert BEST_METHOD == "pose-alv"
+    assert BEST_METHOD == "pose-vote"
     places = load_places(dataset)
     run = evaluate_homing(places, fingerprints["sift"], "best")
-    pose_alv = evaluate_homing(places, fingerprints["sift"], "pose-alv")
-    np.testing.assert_allclose(run.errors_deg, pose_alv.errors_deg)
+    pose_vote = evaluate_homing(places, fingerprints["sift"], "pose-vote")
+    np.testing.assert_allclose(run.errors_deg, pose_vote.errors_deg)
     assert run.stats.n_failed == 0
     assert run.stats.mean_deg < 60.0 and run.stats.under_90 > 0.8  # chance: 90 deg, 50 %
+
+
+def test_pose_vote_keeps_the_axis_of_the_pose(dataset, fingerprints) -> None:
+    """Where the verification found geometry the direction is its translation's axis, one way
+    or the other (only the sign comes from the ALVs)."""
+    places = load_places(dataset)
+    cache = PairCache(fingerprints["sift"])
+    signed = evaluate_homing(places, fingerprints["sift"], "pose-vote", cache=cache)
+    pose = evaluate_homing(places, fingerprints["sift"], "pose", cache=cache)
+    pairs = zip(signed.here, signed.home, strict=True)
+    geometry = np.array([cache.verification(i, j).translation_dir is not None for i, j in pairs])
+    assert geometry.sum() > len(geometry) // 2
+    turn = np.abs(np.remainder(signed.home_direction_rad - pose.home_direction_rad, np.pi))
+    assert np.all(np.minimum(turn, np.pi - turn)[geometry] < 1e-9)

@@ -24,7 +24,16 @@ manifest (section 5.6). The others work without headings:
   side: the raw translation then points away from home (see the README);
 * ``"pose-above-floor"``: ``"pose"`` from the matches above
   :data:`localizer.verification.FLOOR_ELEVATION_DEG` in both panoramas (the floor within 3 m
-  left out), falling back to ``"matched-alv"`` (of all matches) without geometry.
+  left out), falling back to ``"matched-alv"`` (of all matches) without geometry;
+* ``"pose-compass"``: the thesis's ALV of all features, the rotation from the verified pose's
+  yaw (the thesis method with the verification as its compass), ``"matched-alv"`` without
+  geometry;
+* ``"pose-vote"``: the axis of the verified translation (any inlier count) with the sign that
+  most of three votes give: the pose's cheirality counted on the inliers above the floor
+  (:func:`localizer.verification.cheirality_sign`), ``"matched-alv"`` and ``"pose-compass"``;
+  without geometry the circular mean of those two
+  (:func:`localizer.visual_homing.signed_pose_direction_rad`, the closed loop's ``"pose"``
+  variant). The three fail on different pairs (see that function).
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
@@ -34,8 +43,9 @@ Images are read through their camera model (:func:`localizer.features.extract_wi
 ``camera`` as ``--camera``: ``auto`` reads a 2:1 image as equirectangular), so the horizon band
 and the lower and upper halves are elevations of that model.
 
-``"best"`` is the one measured best over the photo rooms, the house and the rendered lab, square
-and corridor (``BEST_METHOD``).
+``"best"`` (``BEST_METHOD``) is the one chosen on the photo rooms, the house and the rendered lab,
+square and corridor, and confirmed on bare houses and photo rooms rendered after the choice
+(README, "Homing on images").
 """
 
 from __future__ import annotations
@@ -50,7 +60,7 @@ import numpy as np
 from tqdm import tqdm
 
 from homing.alv import alv_from_bearings, angular_error_deg
-from homing.bearings import wrap_angle_rad
+from homing.bearings import signed_axis_rad
 from homing.compass import bearing_shift_rad
 from homing.evaluation import (
     DistanceBin,
@@ -70,7 +80,14 @@ from localizer.features import extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from localizer.rays import rays_from_fingerprint
-from localizer.verification import Verification, above_floor, home_direction_rad, verify
+from localizer.verification import (
+    Verification,
+    above_floor,
+    cheirality_sign,
+    home_direction_rad,
+    verify,
+)
+from localizer.visual_homing import signed_pose_direction_rad
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import spawn_process_pool
@@ -84,8 +101,10 @@ METHODS: tuple[str, ...] = (
     "pose",
     "pose-alv",
     "pose-above-floor",
+    "pose-compass",
+    "pose-vote",
 )
-BEST_METHOD = "pose-alv"
+BEST_METHOD = "pose-vote"
 POSE_MIN_INLIERS = 40
 """``pose-alv`` trusts a verified pose with at least this many inliers (measured on the photo
 rooms, house, lab, square and corridor: README, "Homing on images")."""
@@ -203,6 +222,13 @@ class PairCache:
         self.progress = progress
         self._matches: dict[tuple[int, int], np.ndarray] = {}
         self._verifications: dict[tuple[int, int, bool], Verification] = {}
+        self._rays: dict[int, np.ndarray] = {}
+
+    def rays(self, i: int) -> np.ndarray:
+        """The unit rays of fingerprint ``i``'s keypoints (computed once)."""
+        if i not in self._rays:
+            self._rays[i] = rays_from_fingerprint(self.fingerprints[i])
+        return self._rays[i]
 
     def holds(self, fingerprints: Sequence[Fingerprint]) -> bool:
         """Whether this cache is of exactly these fingerprint objects, in this order."""
@@ -236,8 +262,7 @@ class PairCache:
         ``floor``, from those above :data:`localizer.verification.FLOOR_ELEVATION_DEG`."""
         i, j = min(a, b), max(a, b)
         if (i, j, floor) not in self._verifications:
-            fps = self.fingerprints
-            rays_i, rays_j = rays_from_fingerprint(fps[i]), rays_from_fingerprint(fps[j])
+            rays_i, rays_j = self.rays(i), self.rays(j)
             matches = self.matches(i, j)
             if not floor:
                 matches = above_floor(rays_i, rays_j, matches)
@@ -297,14 +322,6 @@ def _compass_directions(bearings: Sequence[np.ndarray], pairs: np.ndarray) -> np
     return alv_home_directions_rad(alvs[pairs[:, 0]], alvs[pairs[:, 1]], rotations)
 
 
-def _signed_axis(axis_rad: np.ndarray, reference_rad: np.ndarray) -> np.ndarray:
-    """``axis_rad`` or its opposite, whichever lies within 90° of ``reference_rad``;
-    ``reference_rad`` itself where the axis is NaN (radians, the same frame)."""
-    opposite = np.cos(axis_rad - reference_rad) < 0.0
-    signed = np.where(opposite, wrap_angle_rad(axis_rad + np.pi), axis_rad)
-    return np.where(np.isnan(axis_rad), reference_rad, signed)
-
-
 def _home_directions(
     method: str, places: Sequence[ManifestEntry], cache: PairCache, pairs: np.ndarray
 ) -> np.ndarray:
@@ -334,7 +351,24 @@ def _home_directions(
                 for i, j in pairs.tolist()
             ]
         )
-        return _signed_axis(axis, matched)
+        return signed_axis_rad(axis, matched)
+    if method in ("pose-compass", "pose-vote"):
+        matched = _home_directions("matched-alv", places, cache, pairs)
+        cache.prepare(pairs, verified=True)
+        alvs = np.array([alv_from_bearings(b) if len(b) else [np.nan, np.nan] for b in bearings])
+        verifications = [cache.verification(i, j) for i, j in pairs.tolist()]
+        if method == "pose-vote":
+            return np.array(
+                [
+                    signed_pose_direction_rad(
+                        v, m, alvs[i], alvs[j], cheirality_sign(v, cache.rays(i), cache.rays(j))
+                    )
+                    for v, m, (i, j) in zip(verifications, matched, pairs.tolist(), strict=True)
+                ]
+            )
+        yaws = np.array([v.yaw_rad for v in verifications])
+        out = alv_home_directions_rad(alvs[pairs[:, 0]], alvs[pairs[:, 1]], -yaws)
+        return np.where(np.isnan(out), matched, out)
     estimate = {"matched-alv": matched_alv_direction_rad, "matched-vote": wedge_vote_direction_rad}
     cache.prepare(pairs)
     for k, (i, j) in enumerate(pairs.tolist()):
