@@ -313,7 +313,7 @@ def main(argv: Sequence[str] | None = None) -> list[RunResult]:
             print(f"  timing {size} places at {width} ...", flush=True)
             results.append(in_child(db, queries, width, f"{width}", 2))
             if size == args.one_thread_size:
-                results.append(in_child(db, queries, width, f"{width}, 1 thread", 1))
+                results.append(in_child(db, queries, width, f"{width}, 1 extraction thread", 1))
 
     print(f"\nload after: {os.getloadavg()}")
     print(

@@ -58,6 +58,10 @@ class LocalizerConfig:
     camera: CameraSpec = field(default_factory=CameraSpec)
     extraction_threads: int = 2
 
+    def __post_init__(self) -> None:
+        if self.extraction_threads < 1:
+            raise ValueError(f"extraction_threads must be >= 1, got {self.extraction_threads!r}")
+
 
 @dataclass(frozen=True, eq=False)
 class LoadedMap:

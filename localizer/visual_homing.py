@@ -3,7 +3,7 @@
 The pure step (:func:`home_step`) turns the current fingerprint and the goal fingerprint (same
 detector) into a home vector in the current robot frame (REP-103: x forward, y left; the vector
 is dimensionless, in ALV units: its direction points home, its length grows with the distance
-to go but is not metres). Two variants:
+to go but is not metres). Three variants:
 
 - ``"thesis"`` (Goldhoorn 2008, sections 2.4 and 5.4): the ALV over *all* feature bearings of
   each view; the unknown heading difference from the bearing-histogram visual compass
@@ -20,8 +20,8 @@ to go but is not metres). Two variants:
   cheirality counted on the inliers above the floor, the matched ALV and the ALV of all
   features with the pose's yaw as the compass
   (:func:`signed_pose_direction_rad`; ``toploc eval homing --method pose-vote``). The step
-  length and the arrival test are the matched ALV's, as for "best"; without geometry the
-  step is "best"'s.
+  length and the arrival test are the matched ALV's, as for "best"; without a translation
+  axis the step is "best"'s.
 
 The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
 extract, step, turn toward the home vector and drive ``gain_m * |home|`` clamped to
@@ -96,11 +96,12 @@ class StepParams:
 class HomeStep:
     """A home vector ``home_xy`` (2,) in the current robot frame (ALV units), the estimated
     rotation ``shift_rad`` of the current view against the goal view (a goal feature at bearing
-    b is seen at b + shift_rad), and the number of features it used (inliers for "best").
+    b is seen at b + shift_rad), and the number of features it used (the matched inliers for
+    "best" and "pose").
 
-    ``parallax_rad`` ("best" only, NaN otherwise): the median absolute bearing change of the
-    inliers once the rotation is removed; 0 at the goal, it grows with the distance to it
-    whatever the layout, where the ALV difference can cancel by chance.
+    ``parallax_rad`` ("best" and "pose"; NaN for "thesis"): the median absolute bearing change
+    of the matched inliers once the rotation is removed; 0 at the goal, it grows with the
+    distance to it whatever the layout, where the ALV difference can cancel by chance.
     """
 
     home_xy: np.ndarray
@@ -202,8 +203,9 @@ def signed_pose_direction_rad(
     ``alv_home`` (2,), each in its own robot frame) rotated by the pose's yaw; an ALV votes
     for the side of the axis it lies on. Each vote fails somewhere else: the cheirality where a
     repeating floor texture outvotes the walls, the ALV of all features where they are unevenly
-    spread (the tiled square room), the matched ALV with few matches. Without geometry: the
-    circular mean of the two ALV directions; NaN if neither exists.
+    spread (the tiled square room), the matched ALV with few matches. A tie (an ALV missing)
+    goes the cheirality's way. Without a translation axis: the circular mean of the rough
+    directions there are (the matched ALV alone when the pose has no yaw); NaN if none.
     """
     alv_dir_rad = math.nan
     if math.isfinite(verification.yaw_rad):
@@ -219,7 +221,8 @@ def signed_pose_direction_rad(
         return float(mean_direction_rad(matched_rad, alv_dir_rad))
     rough = [d for d in (matched_rad, alv_dir_rad) if math.isfinite(d)]
     votes = cheirality + sum(float(np.sign(math.cos(d - axis_rad))) for d in rough)
-    return float(wrap_angle_rad(axis_rad + math.pi)) if votes < 0 else axis_rad
+    flip = votes < 0 or (votes == 0 and cheirality < 0)
+    return float(wrap_angle_rad(axis_rad + math.pi)) if flip else axis_rad
 
 
 def _pose_step(
@@ -229,6 +232,8 @@ def _pose_step(
     matched = _best_step(current, goal, params, shift_rad, matches)
     rays_here, rays_goal = rays_from_fingerprint(current), rays_from_fingerprint(goal)
     verification = verify(rays_here, rays_goal, matches)
+    if math.isnan(home_direction_rad(verification)):
+        return matched
     direction = signed_pose_direction_rad(
         verification,
         matched.direction_rad,
@@ -236,8 +241,6 @@ def _pose_step(
         alv_from_bearings(goal.bearings_rad),
         cheirality_sign(verification, rays_here, rays_goal),
     )
-    if not math.isfinite(verification.yaw_rad):
-        return matched
     home = matched.length * np.array([math.cos(direction), math.sin(direction)])
     shift = -verification.yaw_rad if shift_rad is None else shift_rad
     return HomeStep(home, shift, matched.n_used, matched.parallax_rad)

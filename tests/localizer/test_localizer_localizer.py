@@ -96,3 +96,11 @@ def test_images_of_other_shapes_are_refused():
 
     with pytest.raises(ValueError, match=r"\(4, 4, 2\)"):
         to_grey(np.zeros((4, 4, 2), np.uint8))
+
+
+def test_extraction_threads_must_be_at_least_one():
+    from localizer.localizer import LocalizerConfig
+
+    assert LocalizerConfig().extraction_threads == 2  # the query's halves on both cores
+    with pytest.raises(ValueError, match="extraction_threads"):
+        LocalizerConfig(extraction_threads=0)

@@ -31,9 +31,9 @@ manifest (section 5.6). The others work without headings:
 * ``"pose-vote"``: the axis of the verified translation (any inlier count) with the sign that
   most of three votes give: the pose's cheirality counted on the inliers above the floor
   (:func:`localizer.verification.cheirality_sign`), ``"matched-alv"`` and ``"pose-compass"``;
-  without geometry the circular mean of those two
-  (:func:`localizer.visual_homing.signed_pose_direction_rad`, the closed loop's ``"pose"``
-  variant). The three fail on different pairs (see that function).
+  ``"matched-alv"`` without geometry (:func:`localizer.visual_homing.signed_pose_direction_rad`,
+  the closed loop's ``"pose"`` variant). The three fail on different pairs (see that
+  function).
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
