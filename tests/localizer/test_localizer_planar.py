@@ -15,7 +15,7 @@ from localizer.planar import (
     planar_essential,
     planar_essentials,
 )
-from localizer.verification import VerificationParams, verify
+from localizer.verification import VerificationParams, inlier_mask, verify
 
 
 def test_two_pairs_give_the_exact_essential() -> None:
@@ -45,13 +45,18 @@ def test_planar_ransac_recovers_yaw_and_direction_like_pycolmap(
     query, place, pairs = two_views(rng, 60, yaw_rad, np.array([tx, ty, 0.0]), n_outliers=30)
     planar = verify(query, place, pairs, VerificationParams(motion="planar", seed=seed))
     general = verify(query, place, pairs, VerificationParams(seed=seed))
-    # Random outliers that fall inside the 0.01 rad band can tilt the winning model within the
-    # band (a model that also fits two outliers scores better than the exact one): the yaw is
-    # right to within that band.
-    assert abs(wrap_angle_rad(planar.yaw_rad - yaw_rad)) < 0.01
+    # RANSAC keeps the model with the most inliers, and 300 two-pair samples of a half-true set
+    # always draw the exact model: the winner has at least the exact model's count. Random
+    # outliers that fall inside the 0.01 rad band can make a model tilted within the band win
+    # (it fits two outliers and loses one true pair: seen at a 0.4 m baseline), so the yaw is
+    # right to within about the band and nearly every true pair is kept.
+    exact_t = -(rz(yaw_rad).T @ np.array([tx, ty, 0.0]))
+    exact = inlier_mask(rz(yaw_rad).T, exact_t / np.linalg.norm(exact_t), place, query, 0.01)
+    assert planar.inliers >= int(exact.sum())
+    assert abs(wrap_angle_rad(planar.yaw_rad - yaw_rad)) < 0.02
     assert planar.translation_dir @ general.translation_dir > 0.995  # same direction, same sign
     kept = set(planar.inlier_pairs[:, 0].tolist())
-    assert set(range(30, 60)) <= kept  # every true pair
+    assert len(set(range(30, 60)) - kept) <= 2  # the true pairs
     assert len(kept & set(range(30))) <= len(set(general.inlier_pairs[:, 0]) & set(range(30))) + 2
 
 
