@@ -113,13 +113,25 @@ class BusIdInUse(BusError):  # noqa: N818 (reads as the condition)
 
 
 class BusReplyError(BusError):
-    """The node answered a query with an error reply; ``message`` is its text."""
+    """The node answered a query with an error reply; ``message`` is its text.
+    ``retry_after_s``: the node refused for now (a rate limit) and will accept the same
+    request after this many seconds; None for a refusal that a retry would not change."""
 
-    def __init__(self, key_expr: str, message: str) -> None:
+    def __init__(self, key_expr: str, message: str, retry_after_s: float | None = None) -> None:
         named = message if message.startswith(f"{key_expr}: ") else f"{key_expr}: {message}"
         super().__init__(named)
         self.key_expr = key_expr
         self.message = message
+        self.retry_after_s = retry_after_s
+
+
+class BusRateLimited(BusMessageError):  # noqa: N818 (reads as the condition)
+    """Raised by a handler that refuses a request for now: the error reply carries
+    ``retry_after_s`` (seconds until the same request would be accepted)."""
+
+    def __init__(self, message: str, retry_after_s: float) -> None:
+        super().__init__(message)
+        self.retry_after_s = retry_after_s
 
 
 def check_robot_id(robot_id: str) -> str:
@@ -371,9 +383,13 @@ def decode(
     return message
 
 
-def error_payload(message: str) -> bytes:
-    """The body of an error reply: ``{"schema": 1, "kind": "error", "error": message}``."""
-    return encode("error", {"error": message})
+def error_payload(message: str, retry_after_s: float | None = None) -> bytes:
+    """The body of an error reply: ``{"schema": 1, "kind": "error", "error": message}``, with
+    ``"retry_after_s"`` when the refusal is for now only (a rate limit)."""
+    fields: dict[str, Any] = {"error": message}
+    if retry_after_s is not None:
+        fields["retry_after_s"] = float(retry_after_s)
+    return encode("error", fields)
 
 
 # --- queryables and queries ------------------------------------------------------------------
@@ -434,8 +450,9 @@ def _declare(
                 if not isinstance(error, ValueError):
                     text = f"{type(error).__name__}: {text}"
                 _log.warning("%s: error reply: %s", key_expr, text)
+                retry_after_s = error.retry_after_s if isinstance(error, BusRateLimited) else None
                 try:
-                    query.reply_err(error_payload(text))
+                    query.reply_err(error_payload(text, retry_after_s))
                 except zenoh.ZError:  # session closing
                     _log.debug("%s: could not send the error reply", key_expr)
                 return
@@ -459,12 +476,18 @@ def connected(session: zenoh.Session) -> bool:
     return bool(info.peers_zid() or info.routers_zid())
 
 
-def _error_text(key_expr: str, data: bytes) -> str:
-    """The message of an error reply: ours (JSON ``error``) or Zenoh's own (plain text)."""
+def _error_reply(key_expr: str, data: bytes) -> tuple[str, float | None]:
+    """The message of an error reply, ours (JSON ``error``) or Zenoh's own (plain text), and
+    its ``retry_after_s`` (None if it has none, or it is not a finite non-negative number)."""
     try:
-        return str(decode(key_expr, data, {"error": str})["error"])
+        fields = decode(key_expr, data, {"error": str})
     except BusMessageError:
-        return data.decode(errors="replace")
+        return data.decode(errors="replace"), None
+    retry = fields.get("retry_after_s")
+    if isinstance(retry, bool) or not isinstance(retry, int | float):
+        return str(fields["error"]), None
+    valid = math.isfinite(retry) and retry >= 0
+    return str(fields["error"]), float(retry) if valid else None
 
 
 def request(
@@ -492,11 +515,13 @@ def request(
         raise BusError(f"{key_expr}: query failed: {error}") from error
     waited_s = time.monotonic() - start_s
     errors: list[str] = []
+    retry_after_s: float | None = None
     for reply in replies:
         if reply.ok is not None:
             return reply.ok
         data = reply.err.payload.to_bytes() if reply.err is not None else b""
-        errors.append(_error_text(key_expr, data))
+        text, retry_after_s = _error_reply(key_expr, data)
+        errors.append(text)
     if not errors or errors == ["Timeout"]:
         hint = (
             "is the node running, with this robot id, and does the bus's access control "
@@ -511,7 +536,7 @@ def request(
                 f"node serves this key, or the one asked left the bus ({hint})"
             )
         raise BusTimeout(f"{key_expr}: no reply within {timeout_s:g} s ({hint})")
-    raise BusReplyError(key_expr, "; ".join(errors))
+    raise BusReplyError(key_expr, "; ".join(errors), retry_after_s if len(errors) == 1 else None)
 
 
 def request_json(

@@ -98,3 +98,12 @@ class RateLimit:
                 return False
             self._times.append(now)
             return True
+
+    def wait_s(self, now_s: float | None = None) -> float:
+        """Seconds until :meth:`allow` would admit an event (0 if it would now)."""
+        now = time.monotonic() if now_s is None else now_s
+        with self._lock:
+            live = [t for t in self._times if now - t < self.window_s]
+            if len(live) < self.max_events:
+                return 0.0
+            return live[len(live) - self.max_events] + self.window_s - now

@@ -164,20 +164,53 @@ def test_base_stop_ends_a_move_in_progress(slow_robot):
     remote.close()
 
 
-def test_captures_beyond_the_rate_limit_are_refused(slow_robot):
+def test_captures_beyond_the_rate_limit_are_refused_with_the_wait(slow_robot):
+    zbus, robot = slow_robot
+    key_expr = bus.key(ROBOT_ID, bus.CAMERA_CAPTURE)
+    for _ in range(3):
+        bus.request(zbus.client, key_expr, None, 2.0)
+    with pytest.raises(
+        bus.BusReplyError, match="rate limited: at most 3 captures per second"
+    ) as refused:
+        bus.request(zbus.client, key_expr, None, 2.0)
+    assert refused.value.retry_after_s is not None and 0.0 < refused.value.retry_after_s <= 1.0
+    assert robot.captures == 3
+
+
+def test_the_remote_robot_waits_its_turn_at_the_rate_limit(slow_robot):
     zbus, robot = slow_robot
     remote = RemoteRobot(zbus.client, ROBOT_ID, timeout_s=2.0)
+    start_s = time.monotonic()
+    for _ in range(5):  # 3 per second: the 4th and 5th wait for the window
+        remote.capture()
+    assert robot.captures == 5
+    assert time.monotonic() - start_s > 0.5
+    remote.close()
+
+
+def test_the_remote_robot_gives_up_when_the_wait_outlasts_its_timeout(slow_robot):
+    zbus, _ = slow_robot
+    remote = RemoteRobot(zbus.client, ROBOT_ID, timeout_s=0.2)
     for _ in range(3):
         remote.capture()
-    with pytest.raises(bus.BusReplyError, match="rate limited: at most 3 captures per second"):
+    with pytest.raises(bus.BusReplyError, match="rate limited"):
         remote.capture()
-    assert robot.captures == 3
     remote.close()
 
 
 def test_the_rate_limit_admits_again_after_its_window():
     limit = RateLimit(2, window_s=1.0)
     assert [limit.allow(t) for t in (0.0, 0.1, 0.2, 1.05, 1.15)] == [True, True, False, True, True]
+
+
+def test_the_rate_limit_says_how_long_to_wait():
+    limit = RateLimit(2, window_s=1.0)
+    assert limit.wait_s(0.0) == 0.0
+    limit.allow(0.0)
+    limit.allow(0.3)
+    assert limit.wait_s(0.5) == pytest.approx(0.5)  # the event at 0.0 leaves at 1.0
+    assert limit.wait_s(0.9) == pytest.approx(0.1)
+    assert limit.wait_s(1.0) == 0.0  # it left the window
 
 
 # --- localizer/localize ----------------------------------------------------------------------

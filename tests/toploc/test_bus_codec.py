@@ -108,6 +108,16 @@ def test_field_types_follow_json():
     assert not bus.has_type(float("inf"), float)
 
 
+def test_an_error_reply_may_say_when_to_ask_again():
+    from toploc.bus import _error_reply
+
+    assert _error_reply("k", bus.error_payload("busy", 0.25)) == ("busy", 0.25)
+    assert _error_reply("k", bus.error_payload("bumper pressed")) == ("bumper pressed", None)
+    bad = bus.encode("error", {"error": "busy", "retry_after_s": "soon"})
+    assert _error_reply("k", bad) == ("busy", None)  # not a number: no retry
+    assert _error_reply("k", b"Timeout") == ("Timeout", None)  # Zenoh's own text
+
+
 def test_error_payload_is_a_versioned_json_object():
     message = bus.decode("k", bus.error_payload("bumper pressed"), {"error": str})
     assert message["error"] == "bumper pressed"

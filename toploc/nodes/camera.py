@@ -100,8 +100,9 @@ class CameraNode(Node):
 
     def _on_capture(self, _payload: bytes | None) -> bus.Reply:
         if not self._captures.allow():
-            raise bus.BusMessageError(
-                f"rate limited: at most {self.limits.max_captures_per_s} captures per second"
+            raise bus.BusRateLimited(
+                f"rate limited: at most {self.limits.max_captures_per_s} captures per second",
+                self._captures.wait_s(),
             )
         with self._lock:
             capture = self.camera.capture()

@@ -270,9 +270,23 @@ class RemoteRobot:
         return odometry
 
     def capture(self) -> Capture:
-        """Query ``camera/capture``; the attachment is kept in :attr:`last_capture_meta`."""
+        """Query ``camera/capture``; the attachment is kept in :attr:`last_capture_meta`.
+
+        A capture refused by the camera's rate limit (an error reply with ``retry_after_s``) is
+        asked again after that wait, as long as the wait ends within ``timeout_s`` of the first
+        ask: the node's own localizer or homing must not fail because another client was
+        capturing too (or because a fast query path outran the limit)."""
         key_expr = bus.key(self.robot_id, bus.CAMERA_CAPTURE)
-        sample = bus.request(self.session, key_expr, None, self.timeout_s)
+        deadline_s = time.monotonic() + self.timeout_s
+        while True:
+            try:
+                sample = bus.request(self.session, key_expr, None, self.timeout_s)
+                break
+            except bus.BusReplyError as error:
+                wait_s = error.retry_after_s
+                if wait_s is None or time.monotonic() + wait_s > deadline_s:
+                    raise
+                time.sleep(wait_s)
         if sample.attachment is None:
             raise bus.BusMessageError(f"{key_expr}: reply has no capture attachment")
         meta = bus.decode(f"{key_expr} (attachment)", sample.attachment.to_bytes(), CAPTURE_FIELDS)
