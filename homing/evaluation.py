@@ -181,16 +181,17 @@ def wedge_vote_direction_rad(
     bearings_home_rad: np.ndarray,
     matches: np.ndarray,
     rotation_rad: float,
-    n_bins: int = 360,
 ) -> float:
     """Home direction (rad, current frame) that the most matched features agree with.
 
     A landmark seen along ``u`` here and along ``v`` at home (rotated into the current frame)
     satisfies ``a u - b v = home - here`` with ``a, b > 0``: the home direction lies in the wedge
     from ``u`` to ``-v`` (the arc shorter than pi). Each match votes for the directions in its
-    wedge; the direction in the most wedges wins (circular mean of the tied bins). Mismatches
-    vote for wrong wedges but cannot outvote a consensus, unlike in an average. NaN without
-    matches.
+    wedge; the direction in the most wedges wins. The wedges' ends cut the circle into pieces
+    each inside the same wedges, so the count is exact (no bins: with exact correspondences the
+    arc common to all wedges can be narrower than a degree): the centre of the piece in the most
+    wedges, or the length-weighted circular mean of the centres of tied pieces. Mismatches vote
+    for wrong wedges but cannot outvote a consensus, unlike in an average. NaN without matches.
     """
     m = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
     if len(m) == 0 or not np.isfinite(rotation_rad):
@@ -198,12 +199,18 @@ def wedge_vote_direction_rad(
     start = bearings_here_rad[m[:, 0]]
     end = bearings_home_rad[m[:, 1]] + rotation_rad + np.pi
     span = wrap_angle_rad(end - start)  # signed arc length in (-pi, pi]
-    centres = (np.arange(n_bins) + 0.5) * (2 * np.pi / n_bins)
-    offset = wrap_angle_rad(centres[None, :] - start[:, None])  # (k, n_bins)
-    inside = (offset * np.sign(span)[:, None] >= 0) & (np.abs(offset) <= np.abs(span)[:, None])
+    low = np.mod(np.where(span >= 0, start, start + span), 2 * np.pi)  # each wedge, CCW
+    length = np.abs(span)
+    cuts = np.unique(np.mod(np.concatenate([low, low + length]), 2 * np.pi))
+    widths = np.diff(np.append(cuts, cuts[0] + 2 * np.pi))
+    centres = cuts + widths / 2
+    inside = np.mod(centres[None, :] - low[:, None], 2 * np.pi) <= length[:, None]
     votes = inside.sum(axis=0)
-    best = centres[votes == votes.max()]
-    return float(np.arctan2(np.sin(best).sum(), np.cos(best).sum()))
+    best = votes == votes.max()
+    weights = widths[best]
+    return float(
+        np.arctan2((weights * np.sin(centres[best])).sum(), (weights * np.cos(centres[best])).sum())
+    )
 
 
 @dataclass(frozen=True)
