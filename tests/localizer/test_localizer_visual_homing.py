@@ -200,6 +200,22 @@ def test_drive_home_reaches_home_among_point_landmarks():
     assert result.steps <= 40 and result.distance_m < 5.0
 
 
+def test_arriving_needs_most_of_the_goals_view_matched():
+    """A short home vector with little parallax from a handful of matches is not an arrival (in
+    a bare room a few far features cancel that way metres from the goal)."""
+    world = LandmarkWorld(5)
+    home = Pose2D(3.0, 3.0, 1.0)
+    few = np.arange(60) < 8  # 8 of the goal's 60 features in view: under 20 %
+    robot = PointRobot(home)
+    blind = drive_home(robot, world.fingerprint(home), lambda _: world.fingerprint(robot.pose, few))
+    assert not blind.arrived and blind.steps > 0
+    robot = PointRobot(home)
+    seeing = drive_home(robot, world.fingerprint(home), lambda _: world.fingerprint(robot.pose))
+    assert (seeing.arrived, seeing.reason, seeing.steps) == (True, "arrived", 0)
+    with pytest.raises(ValueError, match="arrive_matched_fraction"):
+        HomingParams(arrive_matched_fraction=1.5)
+
+
 def test_drive_home_reports_each_capture_to_on_step():
     world = LandmarkWorld(5)
     home = Pose2D(3.0, 3.0, 1.0)
