@@ -191,7 +191,8 @@ def wedge_vote_direction_rad(
     each inside the same wedges, so the count is exact (no bins: with exact correspondences the
     arc common to all wedges can be narrower than a degree): the centre of the piece in the most
     wedges, or the length-weighted circular mean of the centres of tied pieces. Mismatches vote
-    for wrong wedges but cannot outvote a consensus, unlike in an average. NaN without matches.
+    for wrong wedges but cannot outvote a consensus, unlike in an average. NaN without matches
+    with finite bearings, or when every wedge is empty. Matches with a NaN bearing are left out.
     """
     m = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
     if len(m) == 0 or not np.isfinite(rotation_rad):
@@ -199,6 +200,10 @@ def wedge_vote_direction_rad(
     start = bearings_here_rad[m[:, 0]]
     end = bearings_home_rad[m[:, 1]] + rotation_rad + np.pi
     span = wrap_angle_rad(end - start)  # signed arc length in (-pi, pi]
+    known = np.isfinite(span)
+    if not known.any():
+        return float("nan")
+    start, span = start[known], span[known]
     low = np.mod(np.where(span >= 0, start, start + span), 2 * np.pi)  # each wedge, CCW
     length = np.abs(span)
     cuts = np.unique(np.mod(np.concatenate([low, low + length]), 2 * np.pi))
@@ -206,6 +211,8 @@ def wedge_vote_direction_rad(
     centres = cuts + widths / 2
     inside = np.mod(centres[None, :] - low[:, None], 2 * np.pi) <= length[:, None]
     votes = inside.sum(axis=0)
+    if votes.max() == 0:  # every wedge empty (each landmark on the line through both places)
+        return float("nan")
     best = votes == votes.max()
     weights = widths[best]
     return float(

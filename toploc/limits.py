@@ -83,7 +83,7 @@ class RateLimit:
     """
 
     def __init__(self, max_events: int, window_s: float = 1.0) -> None:
-        self.max_events = max_events
+        self.max_events = int(max_events)  # a TOML file may give 30.0
         self.window_s = window_s
         self._times: deque[float] = deque()
         self._lock = threading.Lock()

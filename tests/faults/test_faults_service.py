@@ -211,6 +211,9 @@ def test_the_rate_limit_says_how_long_to_wait():
     assert limit.wait_s(0.5) == pytest.approx(0.5)  # the event at 0.0 leaves at 1.0
     assert limit.wait_s(0.9) == pytest.approx(0.1)
     assert limit.wait_s(1.0) == 0.0  # it left the window
+    from_toml = RateLimit(2.0, window_s=1.0)  # type: ignore[arg-type]  # a TOML file's 2.0
+    assert [from_toml.allow(t) for t in (0.0, 0.1, 0.2)] == [True, True, False]
+    assert from_toml.wait_s(0.5) == pytest.approx(0.5)
 
 
 # --- localizer/localize ----------------------------------------------------------------------

@@ -172,3 +172,19 @@ def test_errors_by_distance_bins() -> None:
         errors_by_distance(np.array([1.0]), np.array([1.0]), 0.0)
     with pytest.raises(HomingError, match="equal 1-D"):
         errors_by_distance(np.array([1.0, 2.0]), np.array([1.0]))
+
+
+def test_vote_leaves_out_nan_bearings_and_empty_wedges() -> None:
+    rng = np.random.default_rng(1)
+    landmarks = rng.uniform(-5, 5, size=(30, 2))
+    here, home = np.array([-1.0, 0.0]), np.array([1.0, 0.5])
+    b_here, b_home = _bearings(landmarks, here, 0.0), _bearings(landmarks, home, 0.0)
+    matches = np.column_stack([np.arange(30), np.arange(30)])
+    clean = wedge_vote_direction_rad(b_here, b_home, matches, 0.0)
+    b_here[3] = np.nan
+    assert wedge_vote_direction_rad(b_here, b_home, matches, 0.0) == pytest.approx(clean, abs=0.05)
+    assert math.isnan(wedge_vote_direction_rad(b_here[3:4], b_home[3:4], matches[:1] * 0, 0.0))
+    # a landmark straight behind here and ahead of home: its wedge is a single direction
+    assert math.isnan(
+        wedge_vote_direction_rad(np.array([0.5]), np.array([0.5 + np.pi]), matches[:1] * 0, 0.0)
+    )

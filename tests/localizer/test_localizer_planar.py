@@ -45,14 +45,14 @@ def test_planar_ransac_recovers_yaw_and_direction_like_pycolmap(
     query, place, pairs = two_views(rng, 60, yaw_rad, np.array([tx, ty, 0.0]), n_outliers=30)
     planar = verify(query, place, pairs, VerificationParams(motion="planar", seed=seed))
     general = verify(query, place, pairs, VerificationParams(seed=seed))
-    # RANSAC keeps the model with the most inliers, and 300 two-pair samples of a half-true set
-    # always draw the exact model: the winner has at least the exact model's count. Random
-    # outliers that fall inside the 0.01 rad band can make a model tilted within the band win
-    # (it fits two outliers and loses one true pair: seen at a 0.4 m baseline), so the yaw is
-    # right to within about the band and nearly every true pair is kept.
+    # MSAC keeps the model of lowest truncated error, and 300 two-pair samples of a half-true
+    # set always draw the exact model. Random outliers that fall inside the 0.01 rad band can
+    # make a model tilted within the band score better (it fits two outliers and loses one true
+    # pair: seen at a 0.4 m baseline), so the count is about the exact model's, the yaw right
+    # to within about the band, and nearly every true pair kept.
     exact_t = -(rz(yaw_rad).T @ np.array([tx, ty, 0.0]))
     exact = inlier_mask(rz(yaw_rad).T, exact_t / np.linalg.norm(exact_t), place, query, 0.01)
-    assert planar.inliers >= int(exact.sum())
+    assert planar.inliers >= int(exact.sum()) - 2
     assert abs(wrap_angle_rad(planar.yaw_rad - yaw_rad)) < 0.02
     assert planar.translation_dir @ general.translation_dir > 0.995  # same direction, same sign
     kept = set(planar.inlier_pairs[:, 0].tolist())

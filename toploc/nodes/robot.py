@@ -278,15 +278,17 @@ class RemoteRobot:
         capturing too (or because a fast query path outran the limit)."""
         key_expr = bus.key(self.robot_id, bus.CAMERA_CAPTURE)
         deadline_s = time.monotonic() + self.timeout_s
+        timeout_s = self.timeout_s
         while True:
             try:
-                sample = bus.request(self.session, key_expr, None, self.timeout_s)
+                sample = bus.request(self.session, key_expr, None, timeout_s)
                 break
             except bus.BusReplyError as error:
-                wait_s = error.retry_after_s
-                if wait_s is None or time.monotonic() + wait_s > deadline_s:
+                wait_s = None if error.retry_after_s is None else max(error.retry_after_s, 0.01)
+                if wait_s is None or time.monotonic() + wait_s >= deadline_s:
                     raise
                 time.sleep(wait_s)
+                timeout_s = max(deadline_s - time.monotonic(), 0.01)
         if sample.attachment is None:
             raise bus.BusMessageError(f"{key_expr}: reply has no capture attachment")
         meta = bus.decode(f"{key_expr} (attachment)", sample.attachment.to_bytes(), CAPTURE_FIELDS)
