@@ -60,7 +60,7 @@ from localizer.visual_homing import HomingParams, HomingProgress, HomingResult, 
 from mapdb.records import Fingerprint
 from toploc import bus
 from toploc.limits import Limits
-from toploc.nodes.node import Node
+from toploc.nodes.node import Client, Node
 from toploc.runner import LocalizationRunner
 
 NODE_NAME = "homing"
@@ -350,20 +350,8 @@ class HomingNode(Node):
         return bus.Reply(bus.encode("cancelled", {"cancelled": self.service.cancel()}))
 
 
-class HomingClient:
+class HomingClient(Client):
     """Send goals to, cancel and follow the :class:`HomingNode` of robot ``robot_id``."""
-
-    def __init__(
-        self, session: zenoh.Session, robot_id: str, timeout_s: float = bus.DEFAULT_TIMEOUT_S
-    ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        self.timeout_s = timeout_s
-        self._subscribers: list[Any] = []
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
 
     def goal(self, place_id: int, timeout_s: float = GOAL_TIMEOUT_S) -> dict[str, Any]:
         """Drive to ``place_id``; the node gives up after ``timeout_s`` (reason ``timeout``),
@@ -391,16 +379,8 @@ class HomingClient:
     def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
         """Call ``callback(progress)`` for each ``homing/progress`` message (on a zenoh
         thread); malformed ones are skipped. :meth:`close` undeclares."""
-        subscriber = bus.subscribe(
-            self.session,
-            self.key(bus.HOMING_PROGRESS),
+        return self._subscribe(
+            bus.HOMING_PROGRESS,
             lambda key_expr, data: bus.decode(key_expr, data, {"place_id": int}),
             callback,
         )
-        self._subscribers.append(subscriber)
-        return subscriber
-
-    def close(self) -> None:
-        """Undeclare the subscribers made by :meth:`subscribe`."""
-        bus.undeclare_all(self._subscribers)
-        self._subscribers.clear()

@@ -45,7 +45,7 @@ import zenoh
 from localizer.belief import RoomBelief
 from toploc import bus
 from toploc.limits import Limits
-from toploc.nodes.node import Node
+from toploc.nodes.node import Client, Node
 from toploc.runner import NoPlacesYetError
 
 NODE_NAME = "localizer"
@@ -223,7 +223,7 @@ class LocalizerNode(Node):
         return self._belief_reply(self.service.reset(prior), publish=True)
 
 
-class LocalizerClient:
+class LocalizerClient(Client):
     """Query and follow a :class:`LocalizerNode` of robot ``robot_id`` over ``session``.
 
     Every call raises :class:`~toploc.bus.BusTimeout` if no node answers in time,
@@ -237,15 +237,8 @@ class LocalizerClient:
         timeout_s: float = bus.DEFAULT_TIMEOUT_S,
         localize_timeout_s: float = LOCALIZE_TIMEOUT_S,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        self.timeout_s = timeout_s
+        super().__init__(session, robot_id, timeout_s)
         self.localize_timeout_s = localize_timeout_s
-        self._subscribers: list[Any] = []
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
 
     def _query(self, suffix: str, payload: bytes | None, timeout_s: float) -> dict[str, Any]:
         key_expr = self.key(suffix)
@@ -270,16 +263,8 @@ class LocalizerClient:
     def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
         """Call ``callback(belief)`` for each published belief (on a zenoh thread); malformed
         publications are skipped. Undeclare the returned subscriber, or :meth:`close`."""
-        subscriber = bus.subscribe(
-            self.session,
-            self.key(bus.LOCALIZER_BELIEF),
+        return self._subscribe(
+            bus.LOCALIZER_BELIEF,
             lambda key_expr, data: check_belief(key_expr, bus.decode(key_expr, data)),
             callback,
         )
-        self._subscribers.append(subscriber)
-        return subscriber
-
-    def close(self) -> None:
-        """Undeclare the subscribers made by :meth:`subscribe`."""
-        bus.undeclare_all(self._subscribers)
-        self._subscribers.clear()

@@ -46,7 +46,7 @@ from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
 from mapdb.records import NewPlace, Place, check_name
 from toploc import bus
 from toploc.limits import Limits
-from toploc.nodes.node import Node
+from toploc.nodes.node import Client, Node
 
 NODE_NAME = "mapdb"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -288,7 +288,7 @@ def subscribe_changes(
     )
 
 
-class MapClient:
+class MapClient(Client):
     """Query and extend the map of robot ``robot_id`` over ``session``.
 
     Every call raises :class:`~toploc.bus.BusTimeout` if no map node answers in time,
@@ -302,14 +302,8 @@ class MapClient:
         timeout_s: float = bus.DEFAULT_TIMEOUT_S,
         add_timeout_s: float = ADD_TIMEOUT_S,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        self.timeout_s = timeout_s
+        super().__init__(session, robot_id, timeout_s)
         self.add_timeout_s = add_timeout_s
-
-    def key(self, suffix: str) -> str:
-        """``toploc/<robot_id>/<suffix>``."""
-        return bus.key(self.robot_id, suffix)
 
     def add(
         self,

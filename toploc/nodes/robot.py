@@ -44,7 +44,7 @@ from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robo
 from toploc import bus
 from toploc.limits import Limits
 from toploc.nodes.camera import CameraNode
-from toploc.nodes.node import Node
+from toploc.nodes.node import Client, Node
 
 NODE_NAME = "robot"
 CMD_FIELDS: dict[str, bus.FieldType] = {"turn_deg": float, "forward_m": float}
@@ -223,7 +223,7 @@ class RobotNode(Node):
         return bus.Reply(bus.encode("odom", odometry_fields(odometry, time.time())))
 
 
-class RemoteRobot:
+class RemoteRobot(Client):
     """A :class:`~localizer.robot_protocol.Robot` whose calls go over the bus to a
     :class:`RobotNode`.
 
@@ -231,7 +231,8 @@ class RemoteRobot:
     when done), ``max_image_pixels`` a captured image (checked in its header). Every call
     raises :class:`~toploc.bus.BusTimeout` if the node does not answer,
     :class:`~toploc.bus.BusReplyError` for an error reply, :class:`~toploc.bus.BusMessageError`
-    for a reply that breaks the contract (e.g. a corrupt or oversized image).
+    for a reply that breaks the contract (e.g. a corrupt or oversized image). It listens to
+    ``base/odom`` until :meth:`close`.
     """
 
     def __init__(
@@ -242,24 +243,17 @@ class RemoteRobot:
         move_timeout_s: float = 60.0,
         max_image_pixels: int = MAX_IMAGE_PIXELS,
     ) -> None:
-        self.session = session
-        self.robot_id = bus.check_robot_id(robot_id)
-        self.timeout_s = timeout_s
+        super().__init__(session, robot_id, timeout_s)
         self.move_timeout_s = move_timeout_s
         self.max_image_pixels = max_image_pixels
         self.last_capture_meta: dict[str, Any] | None = None
         self._odom_lock = threading.Lock()
         self._last_odom: tuple[float, Odometry] | None = None  # (stamp_s, odometry)
-        self._odom_sub = bus.subscribe(  # odometry() falls back to a query without one
-            session,
-            bus.key(robot_id, bus.BASE_ODOM),
+        self._subscribe(  # odometry() falls back to a query without one
+            bus.BASE_ODOM,
             lambda key_expr, data: bus.decode(key_expr, data, ODOM_FIELDS),
             self._remember,
         )
-
-    def close(self) -> None:
-        """Stop listening to odometry (the session stays open)."""
-        bus.undeclare_all([self._odom_sub])
 
     def _remember(self, odom: dict[str, Any]) -> Odometry:
         """Keep the newest odometry by stamp (publications arrive on another thread)."""
