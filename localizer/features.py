@@ -24,6 +24,14 @@ because MSER stability and SIFT's coarse octaves see the truncated neighbourhood
 Resolution: an image wider than ``max_width_px`` is first shrunk to that width (``INTER_AREA``);
 keypoints, image size and camera are those of the shrunk image.
 
+Contrast: the image is equalised by CLAHE (``cv2.createCLAHE``; clip limit ``clahe_clip_limit``)
+in full-width horizontal bands ``clahe_band_deg`` tall before detection. SIFT's contrast
+threshold is absolute, so a dim room gave a seventh of the keypoints of the same room lit, and
+dim queries against a lit map were lost; equalised, they localize (README, "Localization"). A
+fingerprint
+recorded without ``clahe_clip_limit`` (a map written before this step) was not equalised:
+:func:`matching_overrides` tells a query to match it.
+
 Filters (thesis §5.8-5.9): a horizon band of ± ``band_deg`` degrees, and the ``"lower"`` or
 ``"upper"`` half of the rows; and an elevation band ``[min_elevation_deg, max_elevation_deg]``
 that leaves out the nadir (tripod, robot body) and the zenith (ceiling lamps) of a sphere.
@@ -78,6 +86,8 @@ class ExtractionParams:
     ``max_width_px``: shrink wider images to this width before detection (None: never).
     ``max_keypoints``: keep at most this many after filtering (None: no limit).
     ``wrap_margin_px``: columns of circular padding on each side for the 360° wrap-around.
+    ``clahe_clip_limit``: CLAHE's clip limit (0: the image as given); ``clahe_band_deg``: the
+    height of its full-width bands, in degrees at the panorama's ``360 / W`` degrees per pixel.
     ``sift_*`` / ``mser_*``: the OpenCV detector parameters.
     ``upright``: describe every keypoint at orientation 0 (the camera does not roll, so the
     dominant-gradient rotation only adds ambiguity). ``descriptor``: ``"sift"``, or
@@ -96,6 +106,8 @@ class ExtractionParams:
     focal_px: float | None = None
     horizon_row_px: float | None = None
     wrap_margin_px: int = 128
+    clahe_clip_limit: float = 2.0
+    clahe_band_deg: float = 45.0
     sift_n_octave_layers: int = 3
     sift_contrast_threshold: float = 0.04
     sift_edge_threshold: float = 10.0
@@ -128,6 +140,10 @@ class ExtractionParams:
             raise ValueError(f"max_keypoints must be None or >= 0, got {self.max_keypoints!r}")
         if self.wrap_margin_px < 0:
             raise ValueError(f"wrap_margin_px must be >= 0, got {self.wrap_margin_px!r}")
+        if not self.clahe_clip_limit >= 0.0:
+            raise ValueError(f"clahe_clip_limit must be >= 0, got {self.clahe_clip_limit!r}")
+        if not 0.0 < self.clahe_band_deg <= 360.0:
+            raise ValueError(f"clahe_band_deg must be in (0, 360], got {self.clahe_band_deg!r}")
 
     def to_dict(self) -> dict[str, float | int | str | bool]:
         """The parameters as a flat mapping; fields that are None are left out."""
@@ -175,6 +191,18 @@ def params_from_preset(name: str, **overrides: Any) -> ExtractionParams:
     return ExtractionParams.from_mapping({**PRESETS[name], **overrides})
 
 
+UNEQUALISED_RECORD: dict[str, Any] = {"clahe_clip_limit": 0.0}
+"""What a fingerprint record without the contrast fields means: extracted without CLAHE."""
+
+
+def matching_overrides(record: Mapping[str, Any]) -> dict[str, Any]:
+    """The extraction settings a query must take from a stored fingerprint's ``record``
+    (its ``params``) to be comparable with it: the contrast equalisation, which changes which
+    keypoints are found. A record from before the equalisation existed means none."""
+    merged = {**UNEQUALISED_RECORD, **record}
+    return {k: merged[k] for k in ("clahe_clip_limit", "clahe_band_deg") if k in merged}
+
+
 def _check_image(image: np.ndarray) -> np.ndarray:
     image = np.asarray(image)
     if image.ndim != 2 or image.dtype != np.uint8:
@@ -191,6 +219,22 @@ def pad_circular(image: np.ndarray, margin_px: int) -> np.ndarray:
     w = image.shape[1]
     columns = np.mod(np.arange(-margin_px, w + margin_px), w)
     return np.ascontiguousarray(image[:, columns])
+
+
+def equalised(image: np.ndarray, params: ExtractionParams) -> np.ndarray:
+    """``image`` after CLAHE in horizontal bands ``clahe_band_deg`` tall (at ``360 / W`` degrees
+    per pixel, rounded to whole bands), each band one tile the panorama's full width; unchanged
+    when the clip limit is 0.
+
+    Full-width bands keep the equalisation exact under a yaw roll of the panorama (square tiles
+    changed with the roll: a rolled test panorama lost 1.2 % of its MSER keypoints), and a
+    horizontal band of a room shares its lighting better than a vertical strip does."""
+    if params.clahe_clip_limit <= 0.0:
+        return image
+    h, w = image.shape
+    bands = max(round(h / (w * params.clahe_band_deg / 360.0)), 1)
+    clahe = cv2.createCLAHE(clipLimit=params.clahe_clip_limit, tileGridSize=(1, bands))
+    return clahe.apply(image)
 
 
 def _sift(params: ExtractionParams) -> cv2.SIFT:
@@ -369,7 +413,7 @@ def extract(
     record = params.to_dict()
     if h < 3:
         return Fingerprint.empty(params.detector, w, h, SIFT_DESCRIPTOR_SIZE, record)
-    padded = pad_circular(image, params.wrap_margin_px)
+    padded = pad_circular(equalised(image, params), params.wrap_margin_px)
     if threads >= 2 and w >= 4 * params.wrap_margin_px:
         # OpenCV releases the GIL: two threads detect the two halves on the two cores
         halves = [(0, w // 2), (w // 2, w)]

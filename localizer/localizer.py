@@ -21,7 +21,7 @@ import numpy as np
 from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateThresholds
 from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
-from localizer.features import extract_with_camera
+from localizer.features import extract_with_camera, matching_overrides
 from localizer.likelihood import Likelihood, RatioLikelihood, room_likelihood
 from localizer.policy import PlaceSimilarity
 from localizer.rays import rays_from_table
@@ -169,6 +169,8 @@ class Localizer:
         )
         calibrated = self.likelihood if isinstance(self.likelihood, RatioLikelihood) else None
         self.evidence_params = _resolved(self.config.evidence, calibrated)
+        # a query is equalised as the map's places were (a map from before CLAHE: not at all)
+        self._overrides = matching_overrides(loaded.table.params[0]) if loaded.table.params else {}
 
     def replace_map(self, loaded: LoadedMap) -> RoomBelief:
         """Localize against ``loaded`` (the map re-read after places, rooms or edges were added)
@@ -183,13 +185,15 @@ class Localizer:
         return self.belief()
 
     def extract(self, image: np.ndarray) -> Fingerprint:
-        """The fingerprint of a camera image (grey or BGR uint8) with the map's detector, read
-        through the configured camera model."""
+        """The fingerprint of a camera image (grey or BGR uint8) with the map's detector and
+        contrast equalisation (:func:`localizer.features.matching_overrides`), read through the
+        configured camera model."""
         return extract_with_camera(
             to_grey(image),
             self.config.camera,
             self.config.detector,
             threads=self.config.extraction_threads,
+            **self._overrides,
         )
 
     def observe(self, image: np.ndarray) -> Observation:

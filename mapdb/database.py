@@ -425,6 +425,13 @@ class MapDatabase:
         return dict(rows)
 
     @_translated
+    def stored_params(self) -> dict[str, Any] | None:
+        """The extraction parameters recorded with the map's first fingerprint (None for a map
+        without places): what a new place or a query must share to be comparable."""
+        row = self.db.execute("SELECT params_json FROM fingerprints ORDER BY id LIMIT 1").fetchone()
+        return None if row is None else dict(json.loads(row[0]))
+
+    @_translated
     def file_size_bytes(self) -> int:
         """Size on disk of the database file plus its write-ahead log."""
         wal = self.path.with_name(self.path.name + "-wal")

@@ -29,7 +29,7 @@ from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.world import World
-from toploc.extraction import resolve_extractor
+from toploc.extraction import map_overrides, resolve_extractor
 
 HOME_ENV = "TOPLOC_HOME"
 
@@ -114,7 +114,8 @@ def ensure_world_map(
         render_dataset(dataset, world, seed=seed, overwrite=True, progress=progress)
     entries = read_manifest(dataset)
     with MapDatabase.open(db_path) as map_db:
-        report = build_map(map_db, entries, resolve_extractor((detector,)), progress=progress)
+        extractor = resolve_extractor((detector,), overrides=map_overrides(map_db))
+        report = build_map(map_db, entries, extractor, progress=progress)
         if report.interrupted:
             raise KeyboardInterrupt
         connect_known_rooms(map_db, read_edges(dataset))

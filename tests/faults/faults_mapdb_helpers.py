@@ -90,8 +90,11 @@ def live_session_members(session_id: int) -> list[int]:
     return members
 
 
-def fake_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> list[Fingerprint]:
-    """Decode ``path`` (``ValueError`` if corrupt); one tiny synthetic fingerprint per preset."""
+def fake_extract(
+    path: Path, presets: tuple[str, ...], camera: str = "auto", overrides: object = None
+) -> list[Fingerprint]:
+    """Decode ``path`` (``ValueError`` if corrupt); one tiny synthetic fingerprint per preset
+    (``camera`` and ``overrides`` as :func:`toploc.extraction.extract_panorama` takes them)."""
     image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if image is None:
         raise ValueError(f"{path}: corrupt or not an image")

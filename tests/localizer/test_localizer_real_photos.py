@@ -1,5 +1,6 @@
 """Real 360° photographs (Poly Haven, CC0; shipped in robot/data/photos): the stored room is
-recognised after a yaw roll, an exposure change, noise and an occluded sector, and a room that
+recognised after a yaw roll, an exposure change (down to a quarter of the light), noise and an
+occluded sector, and a room that
 is not in the map never comes out localized.
 
 The map holds two places per room: the photo itself, and the photo projected onto the room's
@@ -77,6 +78,7 @@ CHANGES = {
     "yaw roll 117°": lambda im: np.roll(im, int(WIDTH_PX * 117 / 360), axis=1),
     "darker": lambda im: exposure(im, 0.55, 1.3),
     "brighter": lambda im: exposure(im, 1.6, 0.8),
+    "a quarter of the light": lambda im: exposure(im, 0.25, 1.0),
     "noise": lambda im: np.clip(
         im + np.random.default_rng(0).normal(0, 10, im.shape), 0, 255
     ).astype(np.uint8),

@@ -41,7 +41,9 @@ def fake_fingerprint(detector: str, width_px: int, height_px: int, seed: int) ->
     )
 
 
-def fake_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> list[Fingerprint]:
+def fake_extract(
+    path: Path, presets: tuple[str, ...], camera: str = "auto", overrides: object = None
+) -> list[Fingerprint]:
     """Decode ``path``; one fake fingerprint per preset (detector = preset up to the first '-')."""
     data = Path(path).read_bytes()
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
@@ -55,7 +57,9 @@ def fake_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> 
     ]
 
 
-def slow_extract(path: Path, presets: tuple[str, ...], camera: str = "auto") -> list[Fingerprint]:
+def slow_extract(
+    path: Path, presets: tuple[str, ...], camera: str = "auto", overrides: object = None
+) -> list[Fingerprint]:
     """``fake_extract`` after sleeping ``TOPLOC_FAKE_EXTRACT_DELAY_S`` seconds (default 0.2)."""
     time.sleep(float(os.environ.get(DELAY_ENV, "0.2")))
     return fake_extract(path, presets)

@@ -39,7 +39,7 @@ from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import MapInfo, check_name
 from toploc.commands.options import camera_option
 from toploc.commands.record import record_command
-from toploc.extraction import resolve_extractor
+from toploc.extraction import map_overrides, resolve_extractor
 
 DEFAULT_DETECTORS = "sift,mser"
 EXIT_FAILED = 1
@@ -195,7 +195,7 @@ def build_command(
             report = build_map(
                 map_db,
                 entries,
-                resolve_extractor(presets, camera),
+                resolve_extractor(presets, camera, map_overrides(map_db)),
                 workers=workers,
                 progress=progress,
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
@@ -245,7 +245,7 @@ def add_command(
     presets = parse_detectors(detectors)
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
-        extractor = resolve_extractor(presets, camera)
+        extractor = resolve_extractor(presets, camera, map_overrides(map_db))
         report = build_map(map_db, [entry], extractor, workers=0, progress=False)
     (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
     if outcome.status is Status.FAILED:

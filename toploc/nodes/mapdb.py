@@ -205,7 +205,7 @@ class MapNode(Node):
         return payload
 
     def _on_add(self, payload: bytes | None, attachment: bytes | None) -> bus.Reply:
-        from toploc.extraction import extract_image
+        from toploc.extraction import extract_image, map_overrides
 
         where = self.key(bus.MAP_ADD)
         meta = self._decode_metadata(where, attachment)
@@ -223,7 +223,7 @@ class MapNode(Node):
         )
         with self._open_writable(where) as map_db:
             presets = tuple(map_db.fingerprint_counts()) or self.detectors
-            fingerprints = extract_image(image, presets, self.camera)
+            fingerprints = extract_image(image, presets, self.camera, map_overrides(map_db))
             try:
                 place_id, new = map_db.add_place(place, fingerprints), True
             except DuplicatePlaceError as error:
