@@ -28,9 +28,8 @@ Contrast: the image is equalised by CLAHE (``cv2.createCLAHE``; clip limit ``cla
 in full-width horizontal bands ``clahe_band_deg`` tall before detection. SIFT's contrast
 threshold is absolute, so a dim room gave a seventh of the keypoints of the same room lit, and
 dim queries against a lit map were lost; equalised, they localize (README, "Localization"). A
-fingerprint
-recorded without ``clahe_clip_limit`` (a map written before this step) was not equalised:
-:func:`matching_overrides` tells a query to match it.
+fingerprint recorded without ``clahe_clip_limit`` (a map written before this step) was not
+equalised: :func:`matching_overrides` tells a query to match it.
 
 Filters (thesis §5.8-5.9): a horizon band of ± ``band_deg`` degrees, and the ``"lower"`` or
 ``"upper"`` half of the rows; and an elevation band ``[min_elevation_deg, max_elevation_deg]``
@@ -197,10 +196,14 @@ UNEQUALISED_RECORD: dict[str, Any] = {"clahe_clip_limit": 0.0}
 
 def matching_overrides(record: Mapping[str, Any]) -> dict[str, Any]:
     """The extraction settings a query must take from a stored fingerprint's ``record``
-    (its ``params``) to be comparable with it: the contrast equalisation, which changes which
-    keypoints are found. A record from before the equalisation existed means none."""
+    (its ``params``) to be comparable with it: the contrast equalisation and the keypoint cap,
+    which change which keypoints are found. A record from before the equalisation existed means
+    none; a record without ``max_keypoints`` means no cap (None is not recorded)."""
     merged = {**UNEQUALISED_RECORD, **record}
-    return {k: merged[k] for k in ("clahe_clip_limit", "clahe_band_deg") if k in merged}
+    kept: dict[str, Any] = {
+        k: merged[k] for k in ("clahe_clip_limit", "clahe_band_deg") if k in merged
+    }
+    return {**kept, "max_keypoints": merged.get("max_keypoints")}
 
 
 def _check_image(image: np.ndarray) -> np.ndarray:
@@ -226,9 +229,8 @@ def equalised(image: np.ndarray, params: ExtractionParams) -> np.ndarray:
     per pixel, rounded to whole bands), each band one tile the panorama's full width; unchanged
     when the clip limit is 0.
 
-    Full-width bands keep the equalisation exact under a yaw roll of the panorama (square tiles
-    changed with the roll: a rolled test panorama lost 1.2 % of its MSER keypoints), and a
-    horizontal band of a room shares its lighting better than a vertical strip does."""
+    Full-width bands keep the equalisation exact under a yaw roll of the panorama: square tiles
+    changed with the roll (a rolled test panorama lost 1.2 % of its MSER keypoints)."""
     if params.clahe_clip_limit <= 0.0:
         return image
     h, w = image.shape

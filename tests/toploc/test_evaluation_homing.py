@@ -141,6 +141,17 @@ def test_cli_homing_writes_json_and_plot(dataset: Path, tmp_path: Path) -> None:
     assert out_png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_cli_homing_reads_the_images_as_given_with_clahe_clip_zero(dataset: Path, tmp_path: Path):
+    out_json = tmp_path / "h.json"
+    result = CliRunner().invoke(
+        main,
+        ["eval", "homing", str(dataset), "--clahe-clip", "0", "--workers", "0", "--no-progress",
+         "--json", str(out_json)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "clahe=0" in result.output and json.loads(out_json.read_text())["clahe_clip"] == 0.0
+
+
 def test_cli_align_prints_bins(dataset: Path, tmp_path: Path) -> None:
     out_png = tmp_path / "a.png"
     result = CliRunner().invoke(
@@ -273,6 +284,14 @@ def test_equirect_images_are_read_as_spheres(equirect_dataset: Path) -> None:
     assert np.all(np.abs(np.rad2deg(sphere.elevation_rad(band.keypoints_xy[:, 1]))) <= 10.0)
     assert 0 < band.n < auto.n
     assert np.all(lower.keypoints_xy[:, 1] >= sphere.horizon_px) and 0 < lower.n < auto.n
+
+
+def test_the_evaluation_equalises_as_the_product_unless_told_not_to(dataset: Path) -> None:
+    path = load_places(dataset)[0].path
+    (default,) = extract_fingerprints([path], FeatureSettings("sift"))
+    (as_given,) = extract_fingerprints([path], FeatureSettings("sift", clahe_clip_limit=0.0))
+    assert default.params["clahe_clip_limit"] == 2.0 and as_given.params["clahe_clip_limit"] == 0.0
+    assert default.n != as_given.n
 
 
 def test_cli_homing_on_equirect_with_several_methods(equirect_dataset: Path, tmp_path) -> None:

@@ -41,6 +41,7 @@ def align_command(
     camera: str,
     band_deg: float | None,
     rows: str,
+    clahe_clip: float,
     workers: int,
     progress: bool,
     bin_m: float,
@@ -53,7 +54,7 @@ def align_command(
     Prints the mean ± standard deviation of the error (degrees) per distance bin.
     """
     with evaluation_errors():
-        settings = FeatureSettings(detector, camera, band_deg, rows)
+        settings = FeatureSettings(detector, camera, band_deg, rows, clahe_clip)
         places, fingerprints, _ = load_and_extract(dataset, settings, workers, progress)
         run = evaluate_alignment(places, fingerprints, bin_m, progress)
     click.echo(f"{dataset}: {detector} rows={rows} band={band_deg}; error (deg) mean ± std")

@@ -16,7 +16,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from localizer.features import DETECTORS
+from localizer.features import DEFAULT_PARAMS, DETECTORS
 from localizer.panorama_io import PanoramaError
 from mapdb.dataset import ManifestEntry
 from mapdb.errors import MapDatabaseError
@@ -46,8 +46,9 @@ def evaluation_errors() -> Iterator[None]:
 
 
 def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
-    """The shared ``DATASET --detector --camera --band-deg --rows --workers --progress``
-    options (the band and the halves are elevations of each image's camera model)."""
+    """The shared ``DATASET --detector --camera --band-deg --rows --clahe-clip --workers
+    --progress`` options (the band and the halves are elevations of each image's camera
+    model)."""
     decorators = [
         click.argument("dataset", type=click.Path(path_type=Path)),
         click.option(
@@ -70,6 +71,13 @@ def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
             default="all",
             show_default=True,
             help="Keep features of all rows or those below (lower) or above (upper) the horizon.",
+        ),
+        click.option(
+            "--clahe-clip",
+            type=click.FloatRange(min=0),
+            default=DEFAULT_PARAMS.clahe_clip_limit,
+            show_default=True,
+            help="Contrast equalisation's clip limit (0: the images as given, as in the thesis).",
         ),
         click.option(
             "--workers",
@@ -151,6 +159,7 @@ def homing_command(
     camera: str,
     band_deg: float | None,
     rows: str,
+    clahe_clip: float,
     workers: int,
     progress: bool,
     methods: tuple[str, ...],
@@ -162,12 +171,13 @@ def homing_command(
     Prints, per method, mean, median and standard deviation of the angular error (eq. 5.5,
     degrees), the score (eq. 5.6), the best home, n, and the shares of errors under 90° and 10°.
     """
-    settings = FeatureSettings(detector, camera, band_deg, rows)
+    settings = FeatureSettings(detector, camera, band_deg, rows, clahe_clip)
     records = []
     with evaluation_errors():
         places, fingerprints, extract_s = load_and_extract(dataset, settings, workers, progress)
         cameras = sorted({str(f.params.get("camera", "cylinder")) for f in fingerprints})
         filters = f"rows={rows}" + ("" if band_deg is None else f" band={band_deg:g}deg")
+        filters += f" clahe={clahe_clip:g}"
         click.echo(f"{dataset}: {detector} {filters}, camera {'/'.join(cameras)}")
         click.echo(f"  time: extraction {extract_s:.1f} s")
         cache = PairCache(fingerprints, progress)
@@ -177,7 +187,8 @@ def homing_command(
             pairs_s = time.perf_counter() - start
             record = _report(run, method, pairs_s)
             records.append({**record, "detector": detector, "camera": camera, "rows": rows,
-                            "band_deg": band_deg, "dataset": str(dataset)})  # fmt: skip
+                            "band_deg": band_deg, "clahe_clip": clahe_clip,
+                            "dataset": str(dataset)})  # fmt: skip
             if plot_path is not None and k == 0:
                 _plot(run, plot_path, f"{detector} {filters} {method}")
                 click.echo(f"  wrote {plot_path}")

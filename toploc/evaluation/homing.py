@@ -76,7 +76,7 @@ from homing.evaluation import (
     wedge_vote_direction_rad,
 )
 from localizer.cameras import parse_camera
-from localizer.features import extract_with_camera
+from localizer.features import DEFAULT_PARAMS, extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from localizer.rays import rays_from_fingerprint
@@ -154,18 +154,27 @@ class FeatureSettings:
     """How the evaluations extract features: a detector preset of
     :data:`localizer.features.PRESETS` (``"sift"``, ``"mser"``), the ``--camera`` text
     (:func:`localizer.cameras.parse_camera`), the horizon band (± degrees of elevation, None:
-    all) and the half of the rows (``"all"``, ``"lower"``, ``"upper"``)."""
+    all), the half of the rows (``"all"``, ``"lower"``, ``"upper"``) and the contrast
+    equalisation's clip limit (0: the images as given, as the thesis read them)."""
 
     detector: str = "sift"
     camera: str = "auto"
     band_deg: float | None = None
     rows: str = "all"
+    clahe_clip_limit: float = DEFAULT_PARAMS.clahe_clip_limit
 
     def extract(self, image: np.ndarray) -> Fingerprint:
         """The fingerprint of a grey panorama, read through its camera model."""
         band: dict[str, Any] = {} if self.band_deg is None else {"band_deg": self.band_deg}
         camera = parse_camera(self.camera)
-        return extract_with_camera(image, camera, self.detector, rows=self.rows, **band)
+        return extract_with_camera(
+            image,
+            camera,
+            self.detector,
+            rows=self.rows,
+            clahe_clip_limit=self.clahe_clip_limit,
+            **band,
+        )
 
 
 def _extract_one(path: Path, settings: FeatureSettings) -> Fingerprint:
