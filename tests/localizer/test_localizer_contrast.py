@@ -70,14 +70,16 @@ def test_a_photo_at_a_quarter_of_the_light_keeps_its_keypoints_only_when_equalis
 def test_a_record_without_the_contrast_fields_means_no_equalisation() -> None:
     new = extract_with_camera(photo(), CameraSpec(), "sift")
     assert matching_overrides(new.params) == {
-        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": None
+        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": 1000
     }  # fmt: skip
     assert matching_overrides(unequalised_record(new).params)["clahe_clip_limit"] == 0.0
 
 
-def test_a_query_keeps_the_map_s_keypoint_cap() -> None:
+def test_a_query_keeps_the_map_s_keypoint_cap_or_its_absence() -> None:
     capped = extract_with_camera(photo(), CameraSpec(), "sift", max_keypoints=300)
     assert capped.n == 300 and matching_overrides(capped.params)["max_keypoints"] == 300
+    uncapped = extract_with_camera(photo(), CameraSpec(), "sift", max_keypoints=None)
+    assert uncapped.n > 300 and matching_overrides(uncapped.params)["max_keypoints"] is None
 
 
 def _localizer(fingerprints: list[Fingerprint]) -> Localizer:
@@ -107,4 +109,4 @@ def test_a_new_place_follows_the_places_already_in_the_map(tmp_path: Path) -> No
     with MapDatabase.open(tmp_path / "map.db") as map_db:
         assert map_overrides(map_db) == {}  # an empty map: the defaults
         map_db.add_place(NewPlace("vestibule", "ab" * 32, "a.png"), [old])
-        assert map_overrides(map_db) == {"clahe_clip_limit": 0.0, "max_keypoints": None}
+        assert map_overrides(map_db)["clahe_clip_limit"] == 0.0
