@@ -169,7 +169,7 @@ class Localizer:
         )
         calibrated = self.likelihood if isinstance(self.likelihood, RatioLikelihood) else None
         self.evidence_params = _resolved(self.config.evidence, calibrated)
-        # a query is equalised as the map's places were (a map from before CLAHE: not at all)
+        # a query is extracted as the map's places were: their equalisation and keypoint cap
         self._overrides = matching_overrides(loaded.table.params[0]) if loaded.table.params else {}
 
     def replace_map(self, loaded: LoadedMap) -> RoomBelief:
@@ -185,9 +185,9 @@ class Localizer:
         return self.belief()
 
     def extract(self, image: np.ndarray) -> Fingerprint:
-        """The fingerprint of a camera image (grey or BGR uint8) with the map's detector and
-        contrast equalisation (:func:`localizer.features.matching_overrides`), read through the
-        configured camera model."""
+        """The fingerprint of a camera image (grey or BGR uint8) with the map's detector,
+        contrast equalisation and keypoint cap (:func:`localizer.features.matching_overrides`),
+        read through the configured camera model."""
         return extract_with_camera(
             to_grey(image),
             self.config.camera,
