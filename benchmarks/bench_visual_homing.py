@@ -25,7 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from localizer.cameras import CameraSpec
-from localizer.visual_homing import VARIANTS, HomingParams, StepParams, drive_home, grey_extractor
+from localizer.visual_homing import (
+    VARIANTS,
+    HomingParams,
+    HomingProgress,
+    StepParams,
+    drive_home,
+    grey_extractor,
+)
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.world import Pose2D, World, capture_places
@@ -46,6 +53,7 @@ class Run:
     steps: int
     driven_m: float
     wall_s: float
+    matched: float  # the last step's matched inliers over the goal's features (NaN: no step)
 
 
 def goal_pose(world: World, room: str) -> Pose2D:
@@ -71,7 +79,13 @@ def run_room(
         )
         start = robot.true_pose
         t0 = time.perf_counter()
-        result = drive_home(robot, goal_fp, extract, params)
+        last = [math.nan]
+
+        def record(progress: HomingProgress, last: list[float] = last) -> None:
+            if progress.home is not None:
+                last[0] = progress.home.n_used / max(goal_fp.n, 1)
+
+        result = drive_home(robot, goal_fp, extract, params, record)
         end = robot.true_pose
         runs.append(
             Run(
@@ -85,6 +99,7 @@ def run_room(
                 result.steps,
                 robot.distance_driven_m,
                 time.perf_counter() - t0,
+                last[0],
             )
         )
     return runs
@@ -138,13 +153,16 @@ def main() -> None:
     for group in runs:
         print(summary_row(group))
     if args.per_run:
-        print("\n| room | variant | seed | start m | final m | reason | moves | driven m |")
-        print("| --- | --- | ---: | ---: | ---: | --- | ---: | ---: |")
+        print(
+            "\n| room | variant | seed | start m | final m | reason | moves | driven m "
+            "| last matched % of goal |"
+        )
+        print("| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: |")
         for group in runs:
             for r in group:
                 print(
                     f"| {r.room} | {r.variant} | {r.seed} | {r.start_m:.2f} | {r.final_m:.2f} "
-                    f"| {r.reason} | {r.steps} | {r.driven_m:.2f} |"
+                    f"| {r.reason} | {r.steps} | {r.driven_m:.2f} | {100 * r.matched:.0f} |"
                 )
 
 
