@@ -152,6 +152,11 @@ def test_cli_homing_reads_the_images_as_given_with_clahe_clip_zero(dataset: Path
     assert "clahe=0" in result.output and json.loads(out_json.read_text())["clahe_clip"] == 0.0
 
 
+def test_cli_homing_refuses_a_clip_limit_that_is_not_a_number(dataset: Path) -> None:
+    result = CliRunner().invoke(main, ["eval", "homing", str(dataset), "--clahe-clip", "nan"])
+    assert result.exit_code == 2 and "--clahe-clip" in result.output and "finite" in result.output
+
+
 def test_cli_align_prints_bins(dataset: Path, tmp_path: Path) -> None:
     out_png = tmp_path / "a.png"
     result = CliRunner().invoke(

@@ -57,7 +57,10 @@ def align_command(
         settings = FeatureSettings(detector, camera, band_deg, rows, clahe_clip)
         places, fingerprints, _ = load_and_extract(dataset, settings, workers, progress)
         run = evaluate_alignment(places, fingerprints, bin_m, progress)
-    click.echo(f"{dataset}: {detector} rows={rows} band={band_deg}; error (deg) mean ± std")
+    click.echo(
+        f"{dataset}: {detector} rows={rows} band={band_deg} clahe={clahe_clip:g}; "
+        "error (deg) mean ± std"
+    )
     click.echo("distance_m  n     " + "".join(f"{name:>18}" for name in COMPASSES))
     reference = run.bins[COMPASSES[0]]
     for k, b in enumerate(reference):

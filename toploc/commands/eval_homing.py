@@ -7,6 +7,7 @@ two places) is a one-line ``Error: ...`` naming the file, and exit status 1.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from collections.abc import Iterator
@@ -45,6 +46,13 @@ def evaluation_errors() -> Iterator[None]:
         raise click.ClickException(str(error)) from error
 
 
+def _finite(_ctx: click.Context, param: click.Parameter, value: float) -> float:
+    """``value`` if it is a finite number (click's ranges let NaN through)."""
+    if not math.isfinite(value):
+        raise click.BadParameter(f"must be a finite number, got {value}", param=param)
+    return value
+
+
 def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
     """The shared ``DATASET --detector --camera --band-deg --rows --clahe-clip --workers
     --progress`` options (the band and the halves are elevations of each image's camera
@@ -77,7 +85,11 @@ def extraction_options(function: click.decorators.FC) -> click.decorators.FC:
             type=click.FloatRange(min=0),
             default=DEFAULT_PARAMS.clahe_clip_limit,
             show_default=True,
-            help="Contrast equalisation's clip limit (0: the images as given, as in the thesis).",
+            callback=_finite,
+            help=(
+                "Contrast equalisation's clip limit (0: the images as given; the 1,000-keypoint "
+                "cap still applies)."
+            ),
         ),
         click.option(
             "--workers",
