@@ -155,7 +155,8 @@ class FeatureSettings:
     :data:`localizer.features.PRESETS` (``"sift"``, ``"mser"``), the ``--camera`` text
     (:func:`localizer.cameras.parse_camera`), the horizon band (± degrees of elevation, None:
     all), the half of the rows (``"all"``, ``"lower"``, ``"upper"``) and the contrast
-    equalisation's clip limit (0: the images as given, as the thesis read them)."""
+    equalisation's clip limit (0: the images as given; the product's 1,000-keypoint cap still
+    applies)."""
 
     detector: str = "sift"
     camera: str = "auto"
