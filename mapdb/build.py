@@ -34,9 +34,12 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import ManifestEntry, NotARegularFileError, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
-from mapdb.workers import spawn_process_pool, stop_workers
+from mapdb.workers import deferred_signals, spawn_process_pool, stop_workers
 
 Extractor = Callable[[Path], list[Fingerprint]]
+
+SIGNAL_POLL_S = 0.1
+"""How often the parallel build looks for a Ctrl-C while it waits for its workers, seconds."""
 
 
 class Status(Enum):
@@ -185,38 +188,46 @@ def _extract_serial(
 def _extract_parallel(
     jobs: Sequence[_Job], extract: Extractor, workers: int
 ) -> Generator[tuple[_Job, list[Fingerprint] | Exception], None, None]:
-    """Results as they complete, with at most ``2 * workers`` jobs submitted at a time."""
+    """Results as they complete, with at most ``2 * workers`` jobs submitted at a time.
+
+    Ctrl-C (and a ``SIGTERM`` handler) takes effect here, between two waits of at most
+    :data:`SIGNAL_POLL_S`, never inside the pool's code (see :func:`deferred_signals`); a place
+    being written when it comes is written whole first.
+    """
     pending = iter(jobs)
-    pool = spawn_process_pool(workers)
     in_flight: dict[Future[list[Fingerprint]], _Job] = {}
     finished = False
+    with deferred_signals() as check_signals:
+        pool = spawn_process_pool(workers)
 
-    def submit_next() -> None:
-        job = next(pending, None)
-        if job is not None:
-            in_flight[pool.submit(extract, job.entry.path)] = job
+        def submit_next() -> None:
+            job = next(pending, None)
+            if job is not None:
+                in_flight[pool.submit(extract, job.entry.path)] = job
 
-    try:
-        for _ in range(2 * workers):
-            submit_next()
-        while in_flight:
-            done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-            for future in done:
-                job = in_flight.pop(future)
+        try:
+            for _ in range(2 * workers):
                 submit_next()
-                try:
-                    result: list[Fingerprint] | Exception = future.result()
-                except BrokenProcessPool:
-                    raise
-                except Exception as error:  # raised by extract in the worker
-                    result = error
-                yield job, result
-        finished = True
-    finally:
-        if finished:
-            pool.shutdown(wait=True)
-        else:  # interrupted, or a fault: the workers' results are no longer wanted
-            stop_workers(pool)
+            while in_flight:
+                done, _ = wait(in_flight, timeout=SIGNAL_POLL_S, return_when=FIRST_COMPLETED)
+                check_signals()
+                for future in done:
+                    job = in_flight.pop(future)
+                    submit_next()
+                    try:
+                        result: list[Fingerprint] | Exception = future.result()
+                    except BrokenProcessPool:
+                        raise
+                    except Exception as error:  # raised by extract in the worker
+                        result = error
+                    yield job, result
+                    check_signals()
+            finished = True
+        finally:
+            if finished:
+                pool.shutdown(wait=True)
+            else:  # interrupted, or a fault: the workers' results are no longer wanted
+                stop_workers(pool)
 
 
 def build_map(

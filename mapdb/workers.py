@@ -25,8 +25,10 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
-from types import TracebackType
+from contextlib import contextmanager
+from types import FrameType, TracebackType
 
 PR_SET_PDEATHSIG = 1
 """``prctl`` option: the signal the kernel sends a process when its parent ends (Linux)."""
@@ -114,3 +116,48 @@ def spawn_process_pool(max_workers: int) -> WorkerPool:
         initializer=init_worker,
         initargs=(os.getpid(),),
     )
+
+
+@contextmanager
+def deferred_signals(
+    signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM),
+) -> Iterator[Callable[[], None]]:
+    """Within the block, ``signums`` are only noted; the ``check()`` it yields runs the handler
+    they would have run (for Ctrl-C: raise ``KeyboardInterrupt``) where the caller calls it.
+
+    Why: a handler that raises can raise in the middle of ``concurrent.futures``' own code, e.g.
+    between a lock's acquire and the ``try`` that releases it. A lock left held blocks the pool's
+    manager thread, and the interpreter waits for that thread at exit for ever (a build that
+    printed "interrupted" and never exited, seen once in CI, is the likely case). Raising only
+    from the caller's loop keeps the exception out of library code.
+
+    A signal noted after the last ``check()`` runs its handler when the block ends normally.
+    Signals whose handler is not a Python function (``SIG_DFL``, ``SIG_IGN``) are left alone, and
+    so is everything outside the main thread, where handlers cannot be set.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    pending: list[int] = []
+    previous: dict[int, Callable[[int, FrameType | None], object]] = {}
+
+    def note(signum: int, _frame: FrameType | None) -> None:
+        pending.append(signum)
+
+    def check() -> None:
+        if pending:
+            signum = pending[0]
+            pending.clear()
+            previous[signum](signum, None)
+
+    for signum in signums:
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            previous[signum] = handler
+            signal.signal(signum, note)
+    try:
+        yield check
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    check()
