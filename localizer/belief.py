@@ -202,11 +202,11 @@ def top_two_ratio(probabilities: np.ndarray) -> float:
 def classify(
     probabilities: np.ndarray,
     thresholds: StateThresholds | None = None,
-    evidence_max_inliers: int | None = None,
+    evidence_max_inliers: float | None = None,
 ) -> LocalizationState:
     """Localized, ambiguous or lost.
 
-    Lost: ``evidence_max_inliers`` (the best place's inliers in the latest frame) is below
+    Lost: ``evidence_max_inliers`` (the best place's count in the latest frame) is below
     ``lost_min_inliers``; ``None`` (no frame yet) skips this test. Localized: top-two ratio
     >= ``localized_ratio`` and entropy <= ``max_entropy_bits``. Otherwise ambiguous.
     """
@@ -251,12 +251,14 @@ class RoomBelief:
         thresholds: StateThresholds | None = None,
         evidence: Sequence[PlaceScore] | None = None,
         stamp_s: float | None = None,
+        count: str = "inliers",
     ) -> RoomBelief:
         """Snapshot with state and entropy computed; ``evidence`` (latest frame) sets the best
-        place and the lost test."""
+        place and the lost test, on the ``count`` its likelihood reads."""
         p = np.asarray(probabilities, dtype=float)
         best = max(evidence, key=lambda e: e.inliers) if evidence else None
-        state = classify(p, thresholds, None if evidence is None else max_inliers(evidence))
+        top = None if evidence is None else max_inliers(evidence, count)
+        state = classify(p, thresholds, top)
         return cls(
             rooms=tuple(rooms),
             probabilities=tuple(float(x) for x in p),

@@ -65,11 +65,14 @@ def _van_der_corput(i: int, n: int) -> float:
 
 
 def leave_one_out_counts(
-    loaded: LoadedMap, params: EvidenceParams | None = None, max_queries: int = MAX_QUERIES
+    loaded: LoadedMap,
+    params: EvidenceParams | None = None,
+    max_queries: int = MAX_QUERIES,
+    count: str = "spread",
 ) -> Iterator[tuple[str, dict[str, float]]]:
-    """Per queried place (:func:`query_places`): its room and the best inlier count of every
-    room of the map when the place is the query and itself is left out (yielded one by one:
-    this takes a while)."""
+    """Per queried place (:func:`query_places`): its room and the best count (``count``, see
+    :func:`~localizer.likelihood.place_count`) of every room of the map when the place is the
+    query and itself is left out (yielded one by one: this takes a while)."""
     params = params or EvidenceParams()
     table = loaded.table
     for i in query_places(table.rooms, max_queries):
@@ -82,7 +85,7 @@ def leave_one_out_counts(
             exclude=int(place_id),
             table_rays=loaded.rays,
         )
-        counts = room_inliers(evidence.places, loaded.rooms)
+        counts = room_inliers(evidence.places, loaded.rooms, count)
         yield table.rooms[i], dict(zip(loaded.rooms, (float(c) for c in counts), strict=True))
 
 
@@ -137,7 +140,8 @@ def _calibrate_with(
 ) -> tuple[RatioLikelihood, CalibrationSamples]:
     room_sizes = Counter(loaded.table.rooms)
     queries = []
-    for query in leave_one_out_counts(loaded, params, max_queries):
+    count = (prior or RatioLikelihood()).count
+    for query in leave_one_out_counts(loaded, params, max_queries, count):
         queries.append(query)
         if on_query is not None:
             on_query()

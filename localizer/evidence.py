@@ -7,6 +7,11 @@ with the ratio test (:func:`localizer.matching.match_descriptors`), and places w
 (:func:`localizer.verification.verify`). The inlier count is the evidence; the recovered yaw
 (``heading_query - heading_place``) is kept as a visual compass for homing.
 
+How much of the query's horizon the inliers cover (:func:`azimuth_coverage`) is kept with the
+count: a room seen through a door fills a narrow arc of the panorama however many inliers it
+gives, the room the robot stands in surrounds it. The calibrated likelihood reads the count
+weighted by that coverage (``PlaceEvidence.spread_inliers``).
+
 Each stored place is read on its own cylinder (the table keeps every place's image size and
 extraction parameters); its keypoints' rays are computed once per map
 (:func:`localizer.rays.rays_from_table`) and passed in as ``table_rays``.
@@ -27,6 +32,30 @@ from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, veri
 from mapdb.records import Fingerprint, FingerprintTable
 
 MOTIONS: tuple[str, ...] = ("auto", "general", "planar")
+
+COVERAGE_ARC_DEG = 30.0
+"""Each inlier covers this arc of the query's horizon, centred on its azimuth (degrees)."""
+
+
+def azimuth_coverage(rays: np.ndarray, arc_deg: float = COVERAGE_ARC_DEG) -> float:
+    """The share of the horizon (0 to 1) within ``arc_deg / 2`` of the azimuth of one of
+    ``rays`` ((n, 3) unit rays, robot frame); 0 for no rays.
+
+    The union of the arcs is the sum, over the azimuths in circular order, of the gap to the
+    next one capped at ``arc_deg``: it does not change when the panorama is rolled in yaw.
+    On the rendered house with one place per room, weighting the inliers by it took the
+    confidently wrong answers of 50 queries off the map's places from 3 to 0 (doorway views:
+    65 inliers through a bedroom's door against its own room's 16) and top-1 from 68 to 72 %
+    (README, "Results").
+    """
+    if not 0.0 < arc_deg <= 360.0:
+        raise ValueError(f"arc_deg must be in (0, 360], got {arc_deg}")
+    rays = np.asarray(rays, dtype=float).reshape(-1, 3)
+    if len(rays) == 0:
+        return 0.0
+    azimuth_deg = np.sort(np.degrees(np.arctan2(rays[:, 1], rays[:, 0])) % 360.0)
+    gaps_deg = np.diff(azimuth_deg, append=azimuth_deg[0] + 360.0)
+    return float(min(np.minimum(gaps_deg, arc_deg).sum(), 360.0) / 360.0)
 
 
 @dataclass(frozen=True)
@@ -86,7 +115,8 @@ class PlaceEvidence:
 
     ``matches``: ratio-test pairs; ``inliers``: pairs consistent with the essential matrix;
     ``yaw_rad``: ``heading_query - heading_place`` (nan without geometry); ``inlier_pairs`` (k, 2)
-    int64 ``[query_keypoint, place_keypoint]``, the place's rows counted within that place.
+    int64 ``[query_keypoint, place_keypoint]``, the place's rows counted within that place;
+    ``coverage``: :func:`azimuth_coverage` of the inliers' query rays (0 to 1).
     """
 
     place_id: int
@@ -95,6 +125,12 @@ class PlaceEvidence:
     inliers: int
     yaw_rad: float
     inlier_pairs: np.ndarray
+    coverage: float = 0.0
+
+    @property
+    def spread_inliers(self) -> float:
+        """The inliers weighted by the share of the query's horizon they cover."""
+        return self.inliers * self.coverage
 
 
 @dataclass(frozen=True)
@@ -143,8 +179,9 @@ def evaluate_place(
         empty = np.zeros((0, 2), dtype=np.int64)
         return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty)
     result = verify(query_rays, table_rays[rows], pairs, params.verification())
+    coverage = azimuth_coverage(query_rays[result.inlier_pairs[:, 0]])
     return PlaceEvidence(
-        place_id, room, len(pairs), result.inliers, result.yaw_rad, result.inlier_pairs
+        place_id, room, len(pairs), result.inliers, result.yaw_rad, result.inlier_pairs, coverage
     )
 
 

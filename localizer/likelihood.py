@@ -53,7 +53,8 @@ LIKELIHOOD_SCHEMA = 1
 
 
 class PlaceScore(Protocol):
-    """Evidence for one stored place: its id, its room and the verified inlier count."""
+    """Evidence for one stored place: its id, its room, the verified inlier count and that
+    count weighted by the share of the query's horizon the inliers cover."""
 
     @property
     def place_id(self) -> int: ...
@@ -64,6 +65,23 @@ class PlaceScore(Protocol):
     @property
     def inliers(self) -> int: ...
 
+    @property
+    def spread_inliers(self) -> float: ...
+
+
+COUNTS: tuple[str, ...] = ("spread", "inliers")
+"""What a likelihood reads of each place: ``spread`` (``spread_inliers``, the default since
+the coverage was measured) or ``inliers`` (the raw count; maps calibrated before)."""
+
+
+def place_count(item: PlaceScore, count: str) -> float:
+    """``item``'s ``spread_inliers`` or ``inliers`` (``count``, one of :data:`COUNTS`)."""
+    if count == "spread":
+        return float(item.spread_inliers)
+    if count == "inliers":
+        return float(item.inliers)
+    raise ValueError(f"count must be one of {COUNTS}, got {count!r}")
+
 
 class Likelihood(Protocol):
     """A model turning the best inlier count per room into a likelihood per room."""
@@ -71,6 +89,11 @@ class Likelihood(Protocol):
     @property
     def min_inliers(self) -> int:
         """Below this best count the frame says nothing (flat likelihood; state lost)."""
+        ...
+
+    @property
+    def count(self) -> str:
+        """What it reads of each place (one of :data:`COUNTS`)."""
         ...
 
     def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
@@ -98,29 +121,40 @@ class RatioLikelihood:
     ``min_inliers``: below this best count the frame is flat and ``lost``. ``max_log_ratio``:
     the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
     of the counts; empty for the defaults), for ``toploc map info`` and the README.
+    ``count``: what is counted of each place (:data:`COUNTS`); a model stored before the
+    coverage existed reads ``inliers``.
 
     The defaults (used for a map that cannot be calibrated: fewer than two places in every room,
     and the prior the fit is pulled towards) are the fit on the bare rendered ``house`` (35
-    equirectangular places 1.5 m apart), with ``min_inliers`` lowered to 10 for rooms barer
-    still (a real bare house gave its own room 7–28 inliers, the others 5–10), and
-    ``per_inlier = 1/30``: where two rooms both match strongly (look-alike rooms, whose
+    equirectangular places 1.5 m apart) on raw inlier counts, before the contrast equalisation,
+    with ``per_inlier = 1/30``: where two rooms both match strongly (look-alike rooms, whose
     difference lies in what the door shows), 30 more inliers multiply the odds by e. The
     leave-one-out barely constrains this term (it sets look-alikes apart), so the prior carries
     much of it. The old softmax's 1/15 made two confident mistakes on a house map with one
     place per room (a bedroom query won by the living room, 22 inliers against 7); 1/30 made
     none there, and in the look-alike offices it ended 11 of 12 kidnappings localized, against
     6 of 12 with 1/15 (README, "Results").
+    They were kept for the ``spread`` count: on the dense house its same-room and other-room
+    counts barely overlap, so a refit follows whatever prior it starts from (-4.4 + 1.17 log +
+    0.020 n from these, flatter again from that); on the house with one place per room these
+    localized 21 of the 36 right answers and that refit 15, neither with a wrong one.
+    ``min_inliers = 6``: ten inliers at random azimuths cover 1 - (11/12)^10 = 58 % of the
+    horizon, so the 10 chance inliers of a real bare house (its own room gave 7–28, the others
+    5–10) count about 6.
     """
 
     intercept: float = -6.9
     slope: float = 2.5
     per_inlier: float = 1.0 / 30.0
-    min_inliers: int = 10
+    min_inliers: int = 6
     max_log_ratio: float = 25.0
     motion: str = "general"
     fit: Mapping[str, float] = field(default_factory=dict)
+    count: str = "spread"
 
     def __post_init__(self) -> None:
+        if self.count not in COUNTS:
+            raise ValueError(f"count must be one of {COUNTS}, got {self.count!r}")
         if not all(math.isfinite(v) for v in (self.intercept, self.slope, self.per_inlier)):
             raise ValueError(f"intercept, slope and per_inlier must be finite, got {self}")
         if self.slope < 0 or self.per_inlier < 0:
@@ -159,6 +193,7 @@ class RatioLikelihood:
             "max_log_ratio": self.max_log_ratio,
             "motion": self.motion,
             "fit": dict(self.fit),
+            "count": self.count,
         }
 
     @classmethod
@@ -178,6 +213,7 @@ class RatioLikelihood:
                 max_log_ratio=float(data["max_log_ratio"]),
                 motion=str(data.get("motion", "general")),
                 fit={str(k): float(v) for k, v in dict(data.get("fit", {})).items()},
+                count=str(data.get("count", "inliers")),
             )
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f"bad stored likelihood {dict(data)}: {error}") from error
@@ -319,6 +355,7 @@ class SoftmaxLikelihood:
     temperature_inliers: float = 15.0
     floor: float = 0.05
     min_inliers: int = 20
+    count: str = "inliers"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.temperature_inliers) and self.temperature_inliers > 0):
@@ -339,8 +376,11 @@ class SoftmaxLikelihood:
         return (1.0 - self.floor) * sharp + self.floor / counts.size
 
 
-def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str]) -> np.ndarray:
-    """Best inlier count per room (order of ``rooms``), 0 for a room without evidence.
+def room_inliers(
+    evidence: Iterable[PlaceScore], rooms: Sequence[str], count: str = "inliers"
+) -> np.ndarray:
+    """Best count per room (order of ``rooms``), 0 for a room without evidence; ``count``
+    says which (:func:`place_count`).
 
     Raises ``ValueError`` for evidence naming a room not in ``rooms`` or a negative count.
     """
@@ -352,10 +392,11 @@ def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str]) -> np.nda
                 f"evidence for place {item.place_id} names room {item.room!r}, "
                 f"which is not one of {list(index)}"
             )
-        if item.inliers < 0:
-            raise ValueError(f"evidence for place {item.place_id} has {item.inliers} inliers")
+        value = place_count(item, count)
+        if value < 0:
+            raise ValueError(f"evidence for place {item.place_id} has {value:g} {count}")
         i = index[item.room]
-        best[i] = max(best[i], float(item.inliers))
+        best[i] = max(best[i], value)
     return best
 
 
@@ -364,9 +405,10 @@ def room_likelihood(
 ) -> np.ndarray:
     """Likelihood per room (order of ``rooms``, sums to 1, every entry > 0) for one frame;
     ``model`` defaults to :class:`RatioLikelihood`'s defaults."""
-    return (model or RatioLikelihood()).from_room_inliers(room_inliers(evidence, rooms))
+    model = model or RatioLikelihood()
+    return model.from_room_inliers(room_inliers(evidence, rooms, model.count))
 
 
-def max_inliers(evidence: Iterable[PlaceScore]) -> int:
-    """The largest inlier count of one frame's evidence (0 if there is none)."""
-    return max((int(item.inliers) for item in evidence), default=0)
+def max_inliers(evidence: Iterable[PlaceScore], count: str = "inliers") -> float:
+    """The largest count (:func:`place_count`) of one frame's evidence (0 if there is none)."""
+    return max((place_count(item, count) for item in evidence), default=0.0)

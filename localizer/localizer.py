@@ -245,6 +245,7 @@ class Localizer:
             replace(self.config.thresholds, lost_min_inliers=self.likelihood.min_inliers),
             evidence,
             stamp_s=time.time(),
+            count=self.likelihood.count,
         )
         return belief if state is None else belief.with_state(state)
 

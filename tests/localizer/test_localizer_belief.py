@@ -32,6 +32,11 @@ class Ev:
     place_id: int
     room: str
     inliers: int
+    coverage: float = 1.0  # the inliers surround the query
+
+    @property
+    def spread_inliers(self) -> float:
+        return self.inliers * self.coverage
 
 
 def evidence_for(inliers_by_room: dict[str, int]) -> list[Ev]:

@@ -29,6 +29,11 @@ class Ev:
     place_id: int
     room: str
     inliers: int
+    coverage: float = 1.0  # the inliers surround the query
+
+    @property
+    def spread_inliers(self) -> float:
+        return self.inliers * self.coverage
 
 
 # ---- the thesis policy -----------------------------------------------------------------------

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from bus_helpers import free_endpoint
+from bus_helpers import free_endpoint, wait_for
 
 from mapdb.database import MapDatabase
 from mapdb.errors import ReadOnlyDatabaseError
@@ -83,7 +83,8 @@ def test_a_place_added_over_the_bus_is_in_the_map_and_in_the_next_localization(s
     added = [p for p in client.places("kitchen") if p["id"] == place_id]
     assert added and added[0]["x_m"] == 2.2 and added[0]["heading_deg"] == 75.0
     assert n_places(db_path) == before + 1
-    assert running.refresher.wait_idle(10)
+    # the map/changed sample may reach the refresher after the reply: wait for the place itself
+    assert wait_for(lambda: place_id in {p.id for p in running.runner.localizer.map.places}, 10)
     localizer = LocalizerClient(client.session, ROBOT_ID, timeout_s=10, localize_timeout_s=60)
     belief = localizer.localize(active=False)
     assert belief["best_place"]["place_id"] == place_id
@@ -110,7 +111,7 @@ def test_a_new_room_and_its_edge_reach_the_localizer(service, client):
     assert reply["new"]
     assert client.connect("annex", "corridor")["added"]
     assert not client.connect("corridor", "annex")["added"]
-    assert running.refresher.wait_idle(10)
+    assert wait_for(lambda: ("annex", "corridor") in running.runner.localizer.map.edges, 10)
     loaded = running.runner.localizer.map
     assert "annex" in loaded.rooms and ("annex", "corridor") in loaded.edges
     assert "annex" in LocalizerClient(client.session, ROBOT_ID).belief()["rooms"]

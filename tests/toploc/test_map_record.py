@@ -60,8 +60,8 @@ def test_record_adds_the_capture_with_the_odometry_pose_and_connects(service):
     assert "the localizer uses it in 0.1 s" in result.output
     assert "corridor <-> seminar" in result.output
     assert added.x_m is not None and math.isfinite(added.x_m) and added.heading_deg is not None
-    assert running.refresher.wait_idle(10)
-    assert added.id in {p.id for p in running.runner.localizer.map.places}
+    # wait for the place itself: the map/changed sample may reach the refresher after the reply
+    assert wait_for(lambda: added.id in {p.id for p in running.runner.localizer.map.places}, 10)
 
 
 def test_record_every_metre_while_a_client_drives(service):
