@@ -3,8 +3,10 @@
 For a dataset (a map's panoramas) and optionally a second one (queries taken elsewhere in the
 same rooms), every variant extracts all panoramas in memory, then each query (each map place
 left out in turn when no query dataset is given) is matched against the map as the localizer
-does (ratio test, essential matrix on rays, inliers). Per query we keep the best inlier count
-of its own room and of every other room, and print:
+does (ratio test, essential matrix on rays, inliers). Per query we keep the best count
+(``--count``: ``spread``, the inliers weighted by the share of the horizon they cover, which
+the likelihood reads; or the raw ``inliers``) of its own room and of every other room, and
+print:
 
 - own room: median and quartiles of the own room's best count;
 - best other: the same for the best count among the other rooms, look-alike rooms included;
@@ -12,7 +14,8 @@ of its own room and of every other room, and print:
 - margin 2x: how often it is at least twice the best other room's and at least 10;
 - AUC: the probability that a same-room count beats a random other-room count.
 
-Run: ``python benchmarks/bench_evidence.py DATASET [--queries DATASET] [--variants a,b]``.
+Run: ``python benchmarks/bench_evidence.py DATASET [--queries DATASET] [--variants a,b]
+[--count spread|inliers]``.
 Variants are named in ``VARIANTS`` below (extraction overrides and evidence parameters).
 """
 
@@ -29,7 +32,7 @@ import numpy as np
 from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, place_evidence
 from localizer.features import extract_with_camera
-from localizer.likelihood import room_inliers
+from localizer.likelihood import COUNTS, room_inliers
 from localizer.localizer import LoadedMap
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import read_manifest
@@ -72,14 +75,16 @@ def counts(
     loaded: LoadedMap,
     queries: list[tuple[Fingerprint, str, int | None]],
     params: EvidenceParams,
+    count: str,
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """Own-room best, best other room, and every other room's best, per query."""
+    """Own-room best, best other room, and every other room's best ``count``, per query."""
     own, best_other, others = [], [], []
     for fingerprint, room, exclude in queries:
         evidence = place_evidence(
             fingerprint, loaded.table, params, loaded.index, exclude, loaded.rays
         )
-        per_room = dict(zip(loaded.rooms, room_inliers(evidence.places, loaded.rooms), strict=True))
+        best = room_inliers(evidence.places, loaded.rooms, count)
+        per_room = dict(zip(loaded.rooms, best, strict=True))
         rest = [v for r, v in per_room.items() if r != room]
         own.append(per_room.get(room, 0.0))
         best_other.append(max(rest, default=0.0))
@@ -98,12 +103,14 @@ def main() -> None:
     parser.add_argument("dataset", type=Path)
     parser.add_argument("--queries", type=Path, default=None)
     parser.add_argument("--variants", default=",".join(VARIANTS))
+    parser.add_argument("--count", choices=COUNTS, default="spread")
     args = parser.parse_args()
     entries = read_manifest(args.dataset)
     query_entries = read_manifest(args.queries) if args.queries else []
     print(
         f"map {args.dataset} ({len(entries)} places); queries: "
         + (f"{args.queries} ({len(query_entries)})" if args.queries else "each place left out")
+        + f"; count: {args.count}"
     )
     header = f"{'variant':14s} {'own room (q1 med q3)':>22s} {'best other':>18s}"
     print(header + f" {'first':>6s} {'margin2x':>8s} {'AUC':>5s} {'s':>5s}")
@@ -119,7 +126,7 @@ def main() -> None:
         else:
             queries = [(fp, r, i + 1) for i, (fp, r) in enumerate(zip(map_fps, rooms, strict=True))]
         params = replace(EvidenceParams(), **evidence)
-        own, best_other, others = counts(loaded, queries, params)
+        own, best_other, others = counts(loaded, queries, params, args.count)
         quart = lambda a: "{:5.0f} {:5.0f} {:5.0f}".format(*np.percentile(a, [25, 50, 75]))  # noqa: E731
         first = np.mean(own > best_other)
         margin = np.mean((own >= 2 * best_other) & (own >= 10))

@@ -25,6 +25,17 @@ def test_localize_prints_the_belief_as_json(building_map):
     assert set(belief["timing_ms"]) == {"extraction", "retrieval", "verification"}
 
 
+def test_localize_prints_each_best_place_with_the_share_of_the_horizon_it_covers(building_map):
+    db_path, dataset = building_map
+    result = run("localize", dataset / "images" / "kitchen_003.png", "--db", db_path)
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    start = lines.index("best places (room, place id, inliers / matches, share of the horizon):")
+    first = lines[start + 1].split()
+    assert first[0] == "kitchen"
+    assert first[-1].endswith("%") and 0 < int(first[-1].rstrip("%")) <= 100
+
+
 def test_localize_names_a_corrupt_image(building_map, tmp_path):
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"\x89PNG\r\n\x1a\n truncated")

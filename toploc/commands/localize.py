@@ -46,9 +46,9 @@ def describe(belief: RoomBelief, observation: Observation, top: int = 5) -> str:
     """A few lines for people: state, the most likely rooms, best places and timings."""
     lines = [f"state: {belief.state} (entropy {belief.entropy_bits:.2f} bits)"]
     lines += [f"  {room:14s} {p:6.3f}" for room, p in belief.ranked()[:top]]
-    lines.append("best places (room, place id, inliers / matches):")
+    lines.append("best places (room, place id, inliers / matches, share of the horizon):")
     lines += [
-        f"  {e.room:14s} {e.place_id:5d} {e.inliers:5d} / {e.matches}"
+        f"  {e.room:14s} {e.place_id:5d} {e.inliers:5d} / {e.matches:<5d} {e.coverage:4.0%}"
         for e in observation.evidence.places[:top]
     ]
     timing = ", ".join(f"{k} {v:.0f} ms" for k, v in observation.timing_ms.items())
