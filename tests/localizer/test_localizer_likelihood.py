@@ -33,6 +33,14 @@ def test_samples_split_own_room_and_the_others() -> None:
     np.testing.assert_array_equal(got.max_other, [4.0, 9.0, 2.0])  # c has one place: no same
 
 
+def test_a_room_seen_through_a_door_is_not_chance() -> None:
+    # a hall place: its own room 180, a bedroom through the door 40, the kitchen 3 by chance
+    queries = [("hall", {"hall": 180.0, "bedroom": 40.0, "kitchen": 3.0})]
+    got = CalibrationSamples.from_queries(queries, {"hall": 2, "bedroom": 1, "kitchen": 1})
+    np.testing.assert_array_equal(got.max_other, [3.0])  # the chance level: the kitchen's
+    np.testing.assert_array_equal(got.other_room, [40.0, 3.0])  # both still other-room samples
+
+
 def test_the_fit_separates_same_from_other_rooms() -> None:
     model = fit_ratio_likelihood(samples(np.random.default_rng(0), 60, 6))
     assert model.log_ratio(25) > 2.0  # a typical own-room count is strong evidence
