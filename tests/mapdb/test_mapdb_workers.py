@@ -5,10 +5,22 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Iterator
 
 import pytest
 
 from mapdb.workers import deferred_signals
+
+
+@pytest.fixture(autouse=True)
+def default_handlers() -> Iterator[None]:
+    """Ctrl-C raises and SIGTERM is default, as in a fresh process (a node command run in the
+    same test process may have left its own handlers)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous_term = signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    yield
+    signal.signal(signal.SIGINT, previous)
+    signal.signal(signal.SIGTERM, previous_term)
 
 
 def test_ctrl_c_in_the_block_waits_for_check() -> None:

@@ -156,6 +156,29 @@ def test_cancel_during_a_goal_stops_it_and_the_robot(building_map):
     assert progress[-1]["state"] == "cancelled" and progress[-1]["step"] == reply["steps"]
 
 
+class RefusingRobot(SlowRobot):
+    """Its base refuses a move that a stop overtook, as the robot node does ("base/stop came
+    before the move started: not moved")."""
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self.stopped.clear()
+        if self.stopped.wait(self.move_s):
+            raise RuntimeError("base/stop came before the move started: not moved")
+        return self.robot.move(turn_rad, forward_m)
+
+
+def test_a_move_the_base_refuses_because_of_the_cancel_ends_as_cancelled(building_map):
+    robot = RefusingRobot(near_kitchen_place(), move_s=5.0)
+    results: list = []
+    with homing_service(building_map[0], robot) as (_, client, progress):
+        worker = run_goal(client, KITCHEN_PLACE, results)
+        assert wait_for(lambda: bool(progress), 10.0)
+        assert client.cancel() is True
+        worker.join(10.0)
+    assert not isinstance(results[0], Exception), results[0]
+    assert (results[0]["arrived"], results[0]["reason"]) == (False, "cancelled")
+
+
 def test_a_goal_times_out_and_the_runner_stop_ends_a_goal(building_map):
     robot = SlowRobot(near_kitchen_place(), move_s=2.0)
     with homing_service(building_map[0], robot) as (service, client, _progress):

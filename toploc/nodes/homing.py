@@ -120,11 +120,21 @@ class _DriveRobot:
 
     def capture(self) -> Capture:
         self._check()
-        return self.robot.capture()
+        try:
+            return self.robot.capture()
+        except Exception:
+            self._check()  # ended meanwhile: the base's complaint about the stop is not an error
+            raise
 
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         self._check()
-        moved = self.robot.move(turn_rad, forward_m)
+        try:
+            moved = self.robot.move(turn_rad, forward_m)
+        except Exception:
+            # a cancel or timeout stops the base; a stop that comes just before the move starts
+            # makes the base refuse it ("not moved"), which ends the drive, not an error
+            self._check()
+            raise
         self.drive.steps += 1
         self.drive.distance_m += abs(moved.moved_m)
         return moved
