@@ -225,6 +225,20 @@ class MapDatabase:
         except sqlite3.Error as error:
             raise translate_sqlite_error(error, self.path) from error
 
+    @contextmanager
+    def reading(self) -> Iterator[MapDatabase]:
+        """A read transaction: every read within sees the map as of one moment, so a writer's
+        commit between two of them (a place, then its edge) is not seen by one half only."""
+        try:
+            self.db.execute("BEGIN")
+        except sqlite3.Error as error:
+            raise translate_sqlite_error(error, self.path) from error
+        try:
+            yield self
+        finally:
+            if self.db.conn.in_transaction:
+                self.db.execute("COMMIT")
+
     @_translated
     def schema_version(self) -> int:
         """The schema version stored in the file."""

@@ -133,7 +133,7 @@ def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     a ``detector`` fingerprint; every error is a :class:`mapdb.errors.MapDatabaseError`.
     """
     path = Path(path)
-    with open_for_reading(path) as map_db:
+    with open_for_reading(path) as opened, opened.reading() as map_db:
         table = load_fingerprint_table(map_db, detector)
         places = map_db.places()
         rooms = tuple(room.name for room in map_db.rooms())

@@ -198,3 +198,17 @@ def test_full_disk_rolls_back_and_keeps_existing_data(
         )
         reopened.add_place(new_place("attic", 77), big)  # without the limit it fits
         assert len(reopened.places()) == 4
+
+
+def test_a_read_transaction_sees_one_moment(
+    filled_map: MapDatabase, db_path: Path, rng: np.random.Generator
+) -> None:
+    before, edges_before = len(filled_map.places()), len(filled_map.edges())
+    with MapDatabase.open(db_path, readonly=True) as reader, reader.reading():
+        assert len(reader.places()) == before
+        filled_map.add_place(new_place("new room", 51), [make_fingerprint(rng)])
+        filled_map.connect_rooms("new room", "hall")
+        assert len(reader.places()) == before  # the place committed meanwhile is not seen
+        assert len(reader.edges()) == edges_before  # nor its edge
+    with MapDatabase.open(db_path, readonly=True) as reader:
+        assert (len(reader.places()), len(reader.edges())) == (before + 1, edges_before + 1)

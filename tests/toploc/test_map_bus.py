@@ -111,9 +111,12 @@ def test_a_new_room_and_its_edge_reach_the_localizer(service, client):
     assert reply["new"]
     assert client.connect("annex", "corridor")["added"]
     assert not client.connect("corridor", "annex")["added"]
-    assert wait_for(lambda: ("annex", "corridor") in running.runner.localizer.map.edges, 10)
-    loaded = running.runner.localizer.map
-    assert "annex" in loaded.rooms and ("annex", "corridor") in loaded.edges
+
+    def refreshed() -> bool:
+        loaded = running.runner.localizer.map
+        return "annex" in loaded.rooms and ("annex", "corridor") in loaded.edges
+
+    assert wait_for(refreshed, 10)
     assert "annex" in LocalizerClient(client.session, ROBOT_ID).belief()["rooms"]
 
 
