@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -33,7 +34,12 @@ class Node:
     """A ``python -m toploc node ...`` process; its output lines on a queue."""
 
     def __init__(self, *args: str) -> None:
-        env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+        env = {
+            **os.environ,
+            "PYTHONPATH": str(REPO),
+            "PYTHONUNBUFFERED": "1",
+            "PYTHONFAULTHANDLER": "1",  # SIGABRT prints every thread's stack (see stop)
+        }
         self.process = subprocess.Popen(
             [sys.executable, "-m", "toploc", "node", *args],
             cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -60,15 +66,20 @@ class Node:
                 return line
         raise AssertionError(f"node not ready after {timeout_s} s: {self.output}")
 
-    def stop(self) -> int:
-        """SIGTERM, as a service manager stops it; the exit status."""
+    def stop(self, timeout_s: float = 20.0) -> int:
+        """SIGTERM, as a service manager stops it; the exit status. A node still running after
+        ``timeout_s`` gets SIGABRT, so that its output ends with where each thread was."""
         if self.process.poll() is None:
             self.process.terminate()
         try:
-            return self.process.wait(10.0)
+            return self.process.wait(timeout_s)
         except subprocess.TimeoutExpired:
-            self.process.kill()
-            return self.process.wait()
+            self.process.send_signal(signal.SIGABRT)
+            try:
+                return self.process.wait(5.0)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                return self.process.wait()
 
 
 @contextmanager
@@ -120,7 +131,8 @@ def test_robot_map_and_localizer_nodes_in_three_processes(building_map, tmp_path
             time.sleep(0.5)
         assert belief["best_place"]["place_id"] == added["place_id"], belief
         assert "annex" in belief["rooms"]
-    assert [node.process.returncode for node in running] == [0, 0, 0], "\n".join(running[2].output)
+    codes = [node.process.returncode for node in running]
+    assert codes == [0, 0, 0], "\n\n".join("\n".join(node.output) for node in running)
     assert all(node.output[-1] == "stopped" for node in running)
 
 
