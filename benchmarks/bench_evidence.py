@@ -83,7 +83,7 @@ def counts(
         evidence = place_evidence(
             fingerprint, loaded.table, params, loaded.index, exclude, loaded.rays
         )
-        best = room_inliers(evidence.places, loaded.rooms, count)
+        best = room_inliers(evidence.places, loaded.rooms, count=count)
         per_room = dict(zip(loaded.rooms, best, strict=True))
         rest = [v for r, v in per_room.items() if r != room]
         own.append(per_room.get(room, 0.0))

@@ -3,9 +3,10 @@ ambiguous / lost test (the likelihood of one frame's evidence is :mod:`localizer
 
 Pure core: numpy and dataclasses in, numpy and dataclasses out; no I/O.
 
-Evidence is anything with ``.place_id``, ``.room`` and ``.inliers`` (see :class:`PlaceScore`):
-per stored place, the number of essential-matrix RANSAC inliers between the query panorama and
-that place (hundreds for the right place, about 0-20 for unrelated places).
+Evidence is anything with ``.place_id``, ``.room``, ``.inliers`` and ``.spread_inliers`` (see
+:class:`PlaceScore`): per stored place, the number of essential-matrix RANSAC inliers between
+the query panorama and that place (hundreds for the right place, about 0-20 for unrelated
+places), and that number weighted by the share of the query's horizon they cover.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from filterpy.discrete_bayes import normalize as fp_normalize
 from filterpy.discrete_bayes import update as fp_update
 from scipy.stats import entropy as scipy_entropy
 
-from localizer.likelihood import PlaceScore, max_inliers
+from localizer.likelihood import PlaceScore, max_inliers, place_count
 
 BELIEF_SCHEMA = 1
 
@@ -174,8 +175,9 @@ class StateThresholds:
     - ``max_entropy_bits = 1.0``: and the belief is concentrated (e.g. 0.9 on one room and the
       rest over four others is 0.67 bits; a 50/50 split is 1 bit, which is never localized
       anyway because its ratio is 1).
-    - ``lost_min_inliers = 20``: the latest frame's best place has fewer inliers than this, so
-      nothing in the map matched (the same number as :attr:`LikelihoodModel.min_inliers`).
+    - ``lost_min_inliers = 20``: the latest frame's best place has a lower count than this, so
+      nothing in the map matched (the localizer sets its likelihood's ``min_inliers`` here, on
+      the same count).
     """
 
     localized_ratio: float = 10.0
@@ -251,13 +253,18 @@ class RoomBelief:
         thresholds: StateThresholds | None = None,
         evidence: Sequence[PlaceScore] | None = None,
         stamp_s: float | None = None,
-        count: str = "inliers",
+        count: str | None = None,
     ) -> RoomBelief:
         """Snapshot with state and entropy computed; ``evidence`` (latest frame) sets the best
-        place and the lost test, on the ``count`` its likelihood reads."""
+        place and the lost test, on ``count``: the count its likelihood reads (required with
+        ``evidence``, see :func:`localizer.likelihood.place_count`)."""
         p = np.asarray(probabilities, dtype=float)
-        best = max(evidence, key=lambda e: e.inliers) if evidence else None
-        top = None if evidence is None else max_inliers(evidence, count)
+        best, top = None, None
+        if evidence is not None:
+            if count is None:
+                raise ValueError("give the count the likelihood reads with the evidence")
+            top = max_inliers(evidence, count=count)
+            best = max(evidence, key=lambda e: place_count(e, count)) if evidence else None
         state = classify(p, thresholds, top)
         return cls(
             rooms=tuple(rooms),

@@ -85,7 +85,7 @@ def leave_one_out_counts(
             exclude=int(place_id),
             table_rays=loaded.rays,
         )
-        counts = room_inliers(evidence.places, loaded.rooms, count)
+        counts = room_inliers(evidence.places, loaded.rooms, count=count)
         yield table.rooms[i], dict(zip(loaded.rooms, (float(c) for c in counts), strict=True))
 
 

@@ -125,7 +125,7 @@ class PlaceEvidence:
     inliers: int
     yaw_rad: float
     inlier_pairs: np.ndarray
-    coverage: float = 0.0
+    coverage: float
 
     @property
     def spread_inliers(self) -> float:
@@ -177,7 +177,7 @@ def evaluate_place(
     place_id, room = int(table.place_ids[place_index]), table.rooms[place_index]
     if len(pairs) < params.min_matches:
         empty = np.zeros((0, 2), dtype=np.int64)
-        return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty)
+        return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty, 0.0)
     result = verify(query_rays, table_rays[rows], pairs, params.verification())
     coverage = azimuth_coverage(query_rays[result.inlier_pairs[:, 0]])
     return PlaceEvidence(

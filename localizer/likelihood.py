@@ -1,9 +1,10 @@
 """How one frame's evidence becomes a likelihood per room, calibrated on the map's own evidence.
 
-For each room take ``n_r``, the inlier count of its best place in the frame (0 if none of its
-places was verified). The question a count answers is: is this what the robot's own room gives,
-or what an unrelated room gives by chance? :class:`RatioLikelihood` answers it with the ratio of
-the two densities,
+For each room take ``n_r``, the count of its best place in the frame (0 if none of its places
+was verified): by default the inliers weighted by the share of the query's horizon they cover
+(``spread``, see :mod:`localizer.evidence`), for a model stored before that the raw inliers.
+The question a count answers is: is this what the robot's own room gives, or what an unrelated
+room gives by chance? :class:`RatioLikelihood` answers it with the ratio of the two densities,
 
     L_r = p(n_r | same room) / p(n_r | other room)
         = exp(intercept + slope * log(1 + n_r) + per_inlier * n_r),
@@ -28,7 +29,8 @@ Why this shape:
   ``L_r`` and a flat ``L`` means the frame cannot tell rooms apart.
 - ``min_inliers``: a frame whose best count is below what the best of the unrelated rooms
   typically reaches by chance (the ``known_quantile``, by default the median, of the per-query
-  maximum over the other rooms in the leave-one-out) says the panorama may come from no room of
+  maximum over the other rooms in the leave-one-out, rooms seen through a door left out; see
+  :class:`CalibrationSamples`) says the panorama may come from no room of
   the map: its likelihood is flat and the state ``lost``. Above it, a room that is not in the
   map still has to beat every other room by the localized ratio on chance counts alone.
 - A logistic fit with a ridge towards the defaults behaves with a dozen samples, and the log
@@ -236,10 +238,13 @@ class CalibrationSamples:
     until the robot drives to a telling place.
 
     ``max_other`` is the chance level the lost test reads: the best count among the other rooms
-    left to chance. A room with at least ``lookalike_min_inliers`` and at least a tenth of the
-    own room's count (``chance_fraction``) is seen, through a door or a window, not matched by
-    chance: it stays an other-room sample for the ratio but is left out of ``max_other``. In
-    a bare map, where chance gives 5–10 and the own room 7–28, nothing changes. Without this,
+    left to chance. A room with at least ``lookalike_min_inliers``, at least a tenth of the
+    own room's count (``chance_fraction``) and at least twice the median of the query's other
+    rooms stands out of them: it is seen, through a door or a window, not matched by chance.
+    It stays an other-room sample for the ratio but is left out of ``max_other``. Chance that
+    lifts every room (shared texture: all of them at 22–40) does not stand out and stays the
+    chance level. In a bare map, where chance gives 5–10 and the own room 7–28, nothing
+    changes. Without this,
     a house map whose hall and living room are mapped whole and the other rooms by one place
     each (its hall places see both bedrooms through their doors) measured a chance level of
     33 and said ``lost`` for 16 of 50 queries, the small rooms' own counts being 13–18; with
@@ -279,7 +284,8 @@ class CalibrationSamples:
             if has_own or lookalikes:
                 same.append(own)
             other += others
-            seen_bar = max(lookalike_min_inliers, chance_fraction * own)
+            typical = float(np.median(others)) if others else 0.0
+            seen_bar = max(lookalike_min_inliers, chance_fraction * own, 2.0 * typical)
             unseen = [count for count in others if count < seen_bar]
             if unseen:
                 max_other.append(max(unseen))
@@ -389,9 +395,7 @@ class SoftmaxLikelihood:
         return (1.0 - self.floor) * sharp + self.floor / counts.size
 
 
-def room_inliers(
-    evidence: Iterable[PlaceScore], rooms: Sequence[str], count: str = "inliers"
-) -> np.ndarray:
+def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str], *, count: str) -> np.ndarray:
     """Best count per room (order of ``rooms``), 0 for a room without evidence; ``count``
     says which (:func:`place_count`).
 
@@ -406,7 +410,7 @@ def room_inliers(
                 f"which is not one of {list(index)}"
             )
         value = place_count(item, count)
-        if value < 0:
+        if not value >= 0:  # negative or NaN
             raise ValueError(f"evidence for place {item.place_id} has {value:g} {count}")
         i = index[item.room]
         best[i] = max(best[i], value)
@@ -419,9 +423,13 @@ def room_likelihood(
     """Likelihood per room (order of ``rooms``, sums to 1, every entry > 0) for one frame;
     ``model`` defaults to :class:`RatioLikelihood`'s defaults."""
     model = model or RatioLikelihood()
-    return model.from_room_inliers(room_inliers(evidence, rooms, model.count))
+    return model.from_room_inliers(room_inliers(evidence, rooms, count=model.count))
 
 
-def max_inliers(evidence: Iterable[PlaceScore], count: str = "inliers") -> float:
-    """The largest count (:func:`place_count`) of one frame's evidence (0 if there is none)."""
-    return max((place_count(item, count) for item in evidence), default=0.0)
+def max_inliers(evidence: Iterable[PlaceScore], *, count: str) -> float:
+    """The largest count (:func:`place_count`) of one frame's evidence (0 if there is none);
+    ``ValueError`` for a negative or NaN one."""
+    values = [place_count(item, count) for item in evidence]
+    if not all(value >= 0 for value in values):
+        raise ValueError(f"evidence counts must be >= 0, got {values}")
+    return max(values, default=0.0)

@@ -227,17 +227,21 @@ class MapDatabase:
 
     @contextmanager
     def reading(self) -> Iterator[MapDatabase]:
-        """A read transaction: every read within sees the map as of one moment, so a writer's
-        commit between two of them (a place, then its edge) is not seen by one half only."""
+        """A read transaction: every read within sees the map as of one moment (a commit that
+        lands meanwhile is seen whole after the block, not in part within it). Two writes
+        (``map/add``, then ``map/connect``) are two commits: a snapshot may fall between them."""
         try:
             self.db.execute("BEGIN")
-        except sqlite3.Error as error:
-            raise translate_sqlite_error(error, self.path) from error
-        try:
-            yield self
-        finally:
+            try:
+                yield self
+            except BaseException:
+                if self.db.conn.in_transaction:
+                    self.db.execute("ROLLBACK")
+                raise
             if self.db.conn.in_transaction:
                 self.db.execute("COMMIT")
+        except sqlite3.Error as error:
+            raise translate_sqlite_error(error, self.path) from error
 
     @_translated
     def schema_version(self) -> int:

@@ -132,8 +132,10 @@ def deferred_signals(
     from the caller's loop keeps the exception out of library code.
 
     A signal noted after the last ``check()`` runs its handler when the block ends normally.
-    Signals whose handler is not a Python function (``SIG_DFL``, ``SIG_IGN``) are left alone, and
-    so is everything outside the main thread, where handlers cannot be set.
+    The first noted signal puts the handlers back, so a second Ctrl-C acts at once (a call
+    that does not return must not keep the program). Signals whose handler is not a Python
+    function (``SIG_DFL``, ``SIG_IGN``) are left alone, and so is everything outside the main
+    thread, where handlers cannot be set.
     """
     if threading.current_thread() is not threading.main_thread():
         yield lambda: None
@@ -141,8 +143,13 @@ def deferred_signals(
     pending: list[int] = []
     previous: dict[int, Callable[[int, FrameType | None], object]] = {}
 
+    def restore() -> None:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
     def note(signum: int, _frame: FrameType | None) -> None:
         pending.append(signum)
+        restore()
 
     def check() -> None:
         if pending:
@@ -158,6 +165,5 @@ def deferred_signals(
     try:
         yield check
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        restore()
     check()

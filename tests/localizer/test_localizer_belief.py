@@ -101,14 +101,16 @@ def test_nothing_matched_gives_a_flat_likelihood():
 
 
 def test_room_inliers_takes_the_best_place_and_rejects_unknown_rooms():
-    counts = room_inliers([Ev(1, "lab", 40), Ev(2, "lab", 90), Ev(3, "corridor", 7)], ROOMS)
+    counts = room_inliers(
+        [Ev(1, "lab", 40), Ev(2, "lab", 90), Ev(3, "corridor", 7)], ROOMS, count="inliers"
+    )
     assert counts[ROOMS.index("lab")] == 90
     assert counts[ROOMS.index("corridor")] == 7
     assert counts[ROOMS.index("office_a")] == 0
     with pytest.raises(ValueError, match="attic"):
-        room_inliers([Ev(1, "attic", 40)], ROOMS)
+        room_inliers([Ev(1, "attic", 40)], ROOMS, count="inliers")
     with pytest.raises(ValueError, match="-3 inliers"):
-        room_inliers([Ev(1, "lab", -3)], ROOMS)
+        room_inliers([Ev(1, "lab", -3)], ROOMS, count="inliers")
 
 
 @pytest.mark.parametrize(
@@ -234,7 +236,7 @@ def test_two_equal_rooms_are_ambiguous():
     p = belief.probabilities
     assert p[0] == pytest.approx(p[1])
     assert classify(p, evidence_max_inliers=300) is LocalizationState.AMBIGUOUS
-    snapshot = RoomBelief.from_probabilities(ROOMS, p, evidence=evidence)
+    snapshot = RoomBelief.from_probabilities(ROOMS, p, evidence=evidence, count="spread")
     assert snapshot.state is LocalizationState.AMBIGUOUS
     assert {snapshot.top[0], snapshot.second[0]} == {"office_a", "office_b"}
 
@@ -247,7 +249,10 @@ def test_all_zero_evidence_is_lost_and_leaves_the_belief_alone():
     after = belief.update(room_likelihood(evidence, ROOMS))
     np.testing.assert_allclose(after, before)
     assert classify(after, evidence_max_inliers=0) is LocalizationState.LOST
-    assert RoomBelief.from_probabilities(ROOMS, after, evidence=evidence).state == "lost"
+    assert (
+        RoomBelief.from_probabilities(ROOMS, after, evidence=evidence, count="spread").state
+        == "lost"
+    )
 
 
 def test_classify_thresholds_are_configuration():
@@ -307,7 +312,9 @@ def test_entropy_bits():
 def test_room_belief_json_round_trip():
     evidence = evidence_for({"office_a": 120, "lab": 40})
     p = np.array([0.6, 0.3, 0.05, 0.05, 0.0])
-    snapshot = RoomBelief.from_probabilities(ROOMS, p, evidence=evidence, stamp_s=12.5)
+    snapshot = RoomBelief.from_probabilities(
+        ROOMS, p, evidence=evidence, stamp_s=12.5, count="spread"
+    )
     data = snapshot.to_json()
     assert data["rooms"] == pytest.approx(dict(zip(ROOMS, p, strict=True)))
     assert data["state"] == "ambiguous"
@@ -339,3 +346,19 @@ def test_a_bad_belief_message_names_the_field(change, message):
     data = RoomBelief.from_probabilities(("a", "b"), np.array([0.5, 0.5])).to_json()
     with pytest.raises(ValueError, match=message):
         RoomBelief.from_json({**data, **change})
+
+
+def test_the_lost_test_reads_the_count_the_likelihood_reads():
+    # 30 inliers, all in a quarter of the horizon: 7.5 spread inliers
+    evidence = [Ev(1, "lab", 30, coverage=0.25)]
+    thresholds = StateThresholds(lost_min_inliers=10)
+    p = np.full(len(ROOMS), 1.0 / len(ROOMS))
+    raw = RoomBelief.from_probabilities(ROOMS, p, thresholds, evidence, count="inliers")
+    spread = RoomBelief.from_probabilities(ROOMS, p, thresholds, evidence, count="spread")
+    assert raw.state is not LocalizationState.LOST
+    assert spread.state is LocalizationState.LOST
+
+
+def test_a_belief_with_evidence_needs_the_count():
+    with pytest.raises(ValueError, match="count"):
+        RoomBelief.from_probabilities(ROOMS, np.full(5, 0.2), evidence=[Ev(1, "lab", 30)])

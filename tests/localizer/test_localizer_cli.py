@@ -135,9 +135,11 @@ def test_map_calibrate_stores_the_likelihood_that_map_info_shows(building_map, t
     result = run("map", "calibrate", "--db", db_path, "--no-progress")
     assert result.exit_code == 0, result.output
     assert "sift likelihood log ratio" in result.output
+    assert "n = spread inliers" in result.output  # says which count the model reads
     info = run("map", "info", "--db", db_path, "--json")
     likelihood = json.loads(info.output)["likelihoods"]["sift"]
     assert likelihood["model"] == "ratio" and likelihood["fit"]["n_same_room"] > 0
+    assert likelihood["count"] == "spread"
 
 
 def test_a_bad_camera_is_refused_by_name(building_map):

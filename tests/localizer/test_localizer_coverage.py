@@ -84,7 +84,7 @@ def test_a_room_seen_through_a_door_does_not_outweigh_the_room_around() -> None:
         evidence(1, "living", np.linspace(150.0, 200.0, 65)),
         evidence(2, "bedroom", np.linspace(0.0, 342.0, 20)),
     ]
-    assert room_inliers(places, rooms, "inliers").tolist() == [20.0, 65.0]
+    assert room_inliers(places, rooms, count="inliers").tolist() == [20.0, 65.0]
     raw = room_likelihood(places, rooms, RatioLikelihood(count="inliers"))
     spread = room_likelihood(places, rooms, RatioLikelihood(count="spread"))
     assert raw[1] > 10 * raw[0]  # the raw count is sure of the living room

@@ -121,7 +121,8 @@ def test_params_are_validated() -> None:
         EvidenceParams(min_matches=3)
     with pytest.raises(ValueError, match="max_error_rad"):
         EvidenceParams(max_error_rad=0.0)
-    assert isinstance(PlaceEvidence(1, "a", 0, 0, float("nan"), np.zeros((0, 2))), PlaceEvidence)
+    empty = PlaceEvidence(1, "a", 0, 0, float("nan"), np.zeros((0, 2)), 0.0)
+    assert isinstance(empty, PlaceEvidence)
 
 
 def test_candidates_on_two_threads_give_the_same_evidence(

@@ -34,11 +34,12 @@ def test_samples_split_own_room_and_the_others() -> None:
 
 
 def test_a_room_seen_through_a_door_is_not_chance() -> None:
-    # a hall place: its own room 180, a bedroom through the door 40, the kitchen 3 by chance
-    queries = [("hall", {"hall": 180.0, "bedroom": 40.0, "kitchen": 3.0})]
-    got = CalibrationSamples.from_queries(queries, {"hall": 2, "bedroom": 1, "kitchen": 1})
-    np.testing.assert_array_equal(got.max_other, [3.0])  # the chance level: the kitchen's
-    np.testing.assert_array_equal(got.other_room, [40.0, 3.0])  # both still other-room samples
+    # a hall place: its own room 180, the two bedrooms through their doors 40 and 38, the
+    # other rooms 2-5 by chance
+    best = {"hall": 180.0, "bed_a": 40.0, "bed_b": 38.0, "kitchen": 3.0, "study": 5.0, "bath": 2.0}
+    got = CalibrationSamples.from_queries([("hall", best)], dict.fromkeys(best, 1) | {"hall": 2})
+    np.testing.assert_array_equal(got.max_other, [5.0])  # the chance level: the study's
+    assert sorted(got.other_room) == [2.0, 3.0, 5.0, 38.0, 40.0]  # all other-room samples
 
 
 def test_the_fit_separates_same_from_other_rooms() -> None:
@@ -115,3 +116,18 @@ def test_json_round_trip_and_bad_input() -> None:
         RatioLikelihood(slope=-1.0)
     with pytest.raises(ValueError, match="room_inliers must be finite"):
         model.from_room_inliers(np.array([1.0, np.nan]))
+
+
+def test_chance_that_lifts_every_room_stays_the_chance_level() -> None:
+    # shared texture: every other room 22-40 against its own 80-150; none stands out
+    rng = np.random.default_rng(4)
+    rooms = [f"r{r}" for r in range(6)]
+    queries = []
+    for q in range(60):
+        own = rooms[q % 6]
+        best = {room: float(rng.integers(22, 41)) for room in rooms}
+        best[own] = float(rng.integers(80, 151))
+        queries.append((own, best))
+    samples = CalibrationSamples.from_queries(queries, dict.fromkeys(rooms, 3))
+    assert len(samples.max_other) == 60
+    assert fit_ratio_likelihood(samples).min_inliers > 30

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 
 from localizer.belief import LocalizationState
+from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap, Localizer, to_grey
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
@@ -104,3 +106,23 @@ def test_extraction_threads_must_be_at_least_one():
     assert LocalizerConfig().extraction_threads == 2  # the query's halves on both cores
     with pytest.raises(ValueError, match="extraction_threads"):
         LocalizerConfig(extraction_threads=0)
+
+
+def test_a_map_calibrated_before_the_spread_count_is_read_on_raw_inliers(building_map):
+    db_path, _ = building_map
+    loaded = LoadedMap.from_snapshot(load_snapshot(db_path))
+    image = capture_in("kitchen", 2.0, 3.0, 40.0)
+    _, observation = Localizer(loaded).localize_once(image)
+    raw = max(p.inliers for p in observation.evidence.places)
+    spread = max(p.spread_inliers for p in observation.evidence.places)
+    assert spread < raw
+    # a stored model whose lost threshold lies between the two counts
+    stored = replace(loaded.likelihood or RatioLikelihood(), min_inliers=math.ceil(spread) + 1)
+    legacy = {k: v for k, v in stored.to_json().items() if k != "count"}
+    states = {}
+    for name, data in (("legacy", legacy), ("spread", stored.to_json())):
+        model = RatioLikelihood.from_json(data)
+        belief, _ = Localizer(replace(loaded, likelihood=model)).localize_once(image)
+        states[name] = belief.state
+    assert states["legacy"] is not LocalizationState.LOST  # raw inliers, above the threshold
+    assert states["spread"] is LocalizationState.LOST

@@ -270,7 +270,9 @@ def run_episode(policy, true_room: str, start_k: int, rng, max_moves: int = 12):
 
     evidence = capture()
     while True:
-        snapshot = RoomBelief.from_probabilities(WORLD_ROOMS, belief.probabilities, None, evidence)
+        snapshot = RoomBelief.from_probabilities(
+            WORLD_ROOMS, belief.probabilities, None, evidence, count="inliers"
+        )
         target = active_step(snapshot, evidence, places, policy, context, max_moves)
         if target is None:
             break

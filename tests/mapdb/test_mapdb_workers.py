@@ -89,3 +89,10 @@ def test_outside_the_main_thread_the_block_changes_nothing() -> None:
     thread.start()
     thread.join()
     assert seen == [before]
+
+
+def test_a_second_ctrl_c_acts_at_once() -> None:
+    with pytest.raises(KeyboardInterrupt), deferred_signals():
+        signal.raise_signal(signal.SIGINT)  # noted
+        signal.raise_signal(signal.SIGINT)  # raises here, not at the end of the block
+        pytest.fail("the second Ctrl-C was deferred too")

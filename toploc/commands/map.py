@@ -307,10 +307,11 @@ def describe_likelihood(model: RatioLikelihood) -> str:
         if "n_same_room" in fit
         else "ratio left at the defaults (no room has two places to compare)"
     )
+    counted = "spread inliers" if model.count == "spread" else "inliers (raw)"
     return (
         f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
-        f"{model.per_inlier:.4f} n ({model.motion} motion), lost below {model.min_inliers} "
-        f"inliers; {where}"
+        f"{model.per_inlier:.4f} n ({model.motion} motion, n = {counted}), lost below "
+        f"{model.min_inliers} {counted}; {where}"
     )
 
 
