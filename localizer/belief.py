@@ -264,7 +264,7 @@ class RoomBelief:
             if count is None:
                 raise ValueError("give the count the likelihood reads with the evidence")
             top = max_inliers(evidence, count=count)
-            best = max(evidence, key=lambda e: place_count(e, count)) if evidence else None
+            best = max(evidence, key=lambda e: place_count(e, count), default=None)
         state = classify(p, thresholds, top)
         return cls(
             rooms=tuple(rooms),

@@ -68,7 +68,8 @@ def leave_one_out_counts(
     loaded: LoadedMap,
     params: EvidenceParams | None = None,
     max_queries: int = MAX_QUERIES,
-    count: str = "spread",
+    *,
+    count: str,
 ) -> Iterator[tuple[str, dict[str, float]]]:
     """Per queried place (:func:`query_places`): its room and the best count (``count``, see
     :func:`~localizer.likelihood.place_count`) of every room of the map when the place is the
@@ -141,7 +142,7 @@ def _calibrate_with(
     room_sizes = Counter(loaded.table.rooms)
     queries = []
     count = (prior or RatioLikelihood()).count
-    for query in leave_one_out_counts(loaded, params, max_queries, count):
+    for query in leave_one_out_counts(loaded, params, max_queries, count=count):
         queries.append(query)
         if on_query is not None:
             on_query()

@@ -30,8 +30,8 @@ Why this shape:
 - ``min_inliers``: a frame whose best count is below what the best of the unrelated rooms
   typically reaches by chance (the ``known_quantile``, by default the median, of the per-query
   maximum over the other rooms in the leave-one-out, rooms seen through a door left out; see
-  :class:`CalibrationSamples`) says the panorama may come from no room of
-  the map: its likelihood is flat and the state ``lost``. Above it, a room that is not in the
+  :class:`CalibrationSamples`) says the panorama may come from no room of the map: its
+  likelihood is flat and the state ``lost``. Above it, a room that is not in the
   map still has to beat every other room by the localized ratio on chance counts alone.
 - A logistic fit with a ridge towards the defaults behaves with a dozen samples, and the log
   ratio is clipped at ``max_log_ratio`` (a frame can move the odds of two rooms by at most
@@ -244,11 +244,10 @@ class CalibrationSamples:
     It stays an other-room sample for the ratio but is left out of ``max_other``. Chance that
     lifts every room (shared texture: all of them at 22–40) does not stand out and stays the
     chance level. In a bare map, where chance gives 5–10 and the own room 7–28, nothing
-    changes. Without this,
-    a house map whose hall and living room are mapped whole and the other rooms by one place
-    each (its hall places see both bedrooms through their doors) measured a chance level of
-    33 and said ``lost`` for 16 of 50 queries, the small rooms' own counts being 13–18; with
-    it 4 (README, "Results").
+    changes. Without this, a house map whose hall and living room are mapped whole and the
+    other rooms by one place each (its hall places see both bedrooms through their doors)
+    measured a chance level of 33 and said ``lost`` for 16 of 50 queries, the small rooms' own
+    counts being 13–18; with it 4 (README, "Results").
     """
 
     same_room: np.ndarray
