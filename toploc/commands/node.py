@@ -69,7 +69,7 @@ def node_group() -> None:
 def _run(config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: ExitStack) -> None:
     """Open the session, ``enter(stack, session, limits)`` the node(s), print what runs and
     wait for SIGINT or SIGTERM; a bus, map, base or camera error is one line."""
-    stop = stop_on_signals()
+    stop = stack.enter_context(stop_on_signals())  # left last: the nodes close first
     try:
         session = stack.enter_context(open_session(config))
         what = enter(stack, session, limits)

@@ -134,11 +134,11 @@ def _serve(
 ) -> MapRefresher:
     """Run the service until SIGINT or SIGTERM; its map refresher."""
     db = db_path or ensure_world_map(sim_world)
-    stop = stop_on_signals()
     spec = None if no_sim else robot_spec
     try:
         localizer_config = LocalizerConfig(camera=parse_camera(camera))
         with (
+            stop_on_signals() as stop,  # left last: the service and the robot close first
             open_served_robot(spec, source, sim_world, sim_room, seed, db, config.robot_id) as (
                 robot, where, true_pose,
             ),

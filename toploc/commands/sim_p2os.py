@@ -7,8 +7,6 @@ p2os:PORT --source sim`` in another process renders its camera where the base re
 
 from __future__ import annotations
 
-import signal
-import threading
 from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
@@ -20,7 +18,12 @@ from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus_config import client_bus_config
-from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
+from toploc.commands.options import (
+    robot_id_option,
+    service_endpoint_option,
+    stop_on_signals,
+    zenoh_config_option,
+)
 from toploc.nodes.sim_truth import SimTruthNode, open_when_up
 
 FAULTS = ("garbage", "truncated", "checksum", "mute")
@@ -85,13 +88,11 @@ def p2os(
         pose = random_free_pose(Obstacles.of(built, 0.2), room, np.random.default_rng([seed, 13]))
     except ValueError as error:
         raise click.ClickException(f"--room {room!r}: {error}") from error
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     sim = P2osSimulator(
         built, pose, time_scale=time_scale, link=link, faults=simulator_faults(faults, fault_every)
     )
     with ExitStack() as stack:
+        stop = stack.enter_context(stop_on_signals())  # left last: the simulator closes first
         stack.enter_context(sim)
         click.echo(f"port: {sim.port}")
         click.echo(
