@@ -12,8 +12,9 @@ worker ends it once its parent pid changes (the parent is gone, the worker was r
 Linux counts the *thread* that started a worker as its parent, and a ``ProcessPoolExecutor``
 starts workers in the thread that calls ``submit``: submit from a thread that outlives the pool
 (the main thread, as every caller does).
-Workers ignore ``SIGINT``: Ctrl-C in a terminal reaches the whole process group, and the parent
-alone decides what an interrupt means (it stops the pool, see :func:`stop_workers`).
+Workers ignore ``SIGINT`` and ``SIGTERM``: Ctrl-C in a terminal, and a service manager's stop,
+reach the whole process group, and the parent alone decides what an interrupt means (it stops
+the pool, see :func:`stop_workers`).
 """
 
 from __future__ import annotations
@@ -56,12 +57,13 @@ def _watch_parent(parent_pid: int, poll_s: float) -> None:
 
 
 def init_worker(parent_pid: int) -> None:
-    """Initializer of every pool worker: die with the parent, leave Ctrl-C to it.
+    """Initializer of every pool worker: die with the parent, leave Ctrl-C and SIGTERM to it.
 
     ``parent_pid`` is the pool owner's pid, read before the worker started: a parent that died
     before this runs is noticed too.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     _set_parent_death_signal()
     if os.getppid() != parent_pid:
         os._exit(1)
@@ -131,7 +133,9 @@ def deferred_signals(
     printed "interrupted" and never exited, seen once in CI, is the likely case). Raising only
     from the caller's loop keeps the exception out of library code.
 
-    A signal noted after the last ``check()`` runs its handler when the block ends normally.
+    A signal noted after the last ``check()`` runs its handler when the block ends, also when
+    it ends by an error (a signal that broke something is still the signal: Ctrl-C, not the
+    error it caused, is what the user is told).
     The first noted signal puts the handlers back, so a second Ctrl-C acts at once (a call
     that does not return must not keep the program). Signals whose handler is not a Python
     function (``SIG_DFL``, ``SIG_IGN``) are left alone, and so is everything outside the main
@@ -166,4 +170,4 @@ def deferred_signals(
         yield check
     finally:
         restore()
-    check()
+        check()

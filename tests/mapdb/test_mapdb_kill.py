@@ -39,7 +39,9 @@ def places_so_far(db_path: Path) -> int:
 
 @pytest.mark.skipif(not hasattr(os, "killpg"), reason="needs POSIX process groups")
 @pytest.mark.usefixtures("fake_extractor")
-@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGINT], ids=["kill-9", "ctrl-c"])
+@pytest.mark.parametrize(
+    "signum", [signal.SIGKILL, signal.SIGINT, signal.SIGTERM], ids=["kill-9", "ctrl-c", "sigterm"]
+)
 def test_signal_mid_build_then_rerun_completes(
     make_dataset, db_path: Path, signum: signal.Signals
 ) -> None:

@@ -96,3 +96,10 @@ def test_a_second_ctrl_c_acts_at_once() -> None:
         signal.raise_signal(signal.SIGINT)  # noted
         signal.raise_signal(signal.SIGINT)  # raises here, not at the end of the block
         pytest.fail("the second Ctrl-C was deferred too")
+
+
+def test_a_signal_noted_before_an_error_is_raised_over_it() -> None:
+    with pytest.raises(KeyboardInterrupt) as raised, deferred_signals():
+        signal.raise_signal(signal.SIGINT)
+        raise RuntimeError("a worker died")
+    assert isinstance(raised.value.__context__, RuntimeError)
