@@ -228,3 +228,9 @@ def test_build_with_real_extraction(tmp_path: Path, db_path: Path) -> None:
         (place,) = [p for p in map_db.places() if p.source.endswith("p0.png")]
         assert (place.image_width_px, place.image_height_px) == (240, 48)
     assert_consistent(db_path)
+
+
+def test_info_names_the_rooms_with_one_place(filled_map: MapDatabase, db_path: Path) -> None:
+    text = run("info", "--db", db_path).stdout
+    (hint,) = [line for line in text.splitlines() if "one place only" in line]
+    assert "hall" in hint and "kitchen" not in hint  # the kitchen has two places

@@ -330,11 +330,22 @@ def connect_command(room_a: str, room_b: str, db_path: Path) -> None:
 
 
 def _format_info(info: MapInfo) -> str:
+    single = [room.name for room in info.rooms if room.n_places == 1]
+    hint = (
+        [
+            f"  one place only: {', '.join(single)} (a view far from it, at a door or in a "
+            "corner, may stay ambiguous; a second place there helps, and lets the calibration "
+            "measure the room)"
+        ]
+        if single
+        else []
+    )
     lines = [
         f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
         f"{len(info.rooms)} rooms, {info.n_places} places",
         "rooms:",
         *(f"  {room.name}: {room.n_places} places" for room in info.rooms),
+        *hint,
         "fingerprints: "
         + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
         f"edges ({len(info.edges)}):",
