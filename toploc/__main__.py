@@ -1,6 +1,6 @@
 """``python -m toploc`` runs the command line."""
 
-from toploc.cli import main
+from toploc.cli import run
 
 if __name__ == "__main__":
-    main()
+    run()

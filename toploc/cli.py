@@ -10,6 +10,7 @@ handler (``serve`` and ``node`` do).
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import sys
 from types import FrameType
@@ -75,6 +76,14 @@ class ToplocGroup(click.Group):
 def main(ctx: click.Context, debug: bool) -> None:
     """toploc: which room is the robot in, and where should it drive to find out."""
     ctx.obj = {"debug": debug}
+
+
+def run() -> None:
+    """The ``toploc`` program: :func:`main`, with ``SIGUSR1`` printing every thread's stack to
+    stderr (for a service that seems stuck: ``kill -USR1 PID``; it goes on running)."""
+    if hasattr(signal, "SIGUSR1"):
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    main()
 
 
 main.add_command(simulate)

@@ -111,13 +111,14 @@ def test_a_new_room_and_its_edge_reach_the_localizer(service, client):
     assert reply["new"]
     assert client.connect("annex", "corridor")["added"]
     assert not client.connect("corridor", "annex")["added"]
+    localizer = LocalizerClient(client.session, ROBOT_ID)
 
-    def refreshed() -> bool:
-        loaded = running.runner.localizer.map
-        return "annex" in loaded.rooms and ("annex", "corridor") in loaded.edges
+    def refreshed() -> bool:  # the map with the edge, and the belief a client sees after it
+        edges = running.runner.localizer.map.edges
+        return ("annex", "corridor") in edges and "annex" in localizer.belief()["rooms"]
 
     assert wait_for(refreshed, 10)
-    assert "annex" in LocalizerClient(client.session, ROBOT_ID).belief()["rooms"]
+    assert "annex" in running.runner.localizer.map.rooms
 
 
 def test_connect_names_an_unknown_room(client):
