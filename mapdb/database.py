@@ -208,15 +208,13 @@ class MapDatabase:
         self.close()
 
     @contextmanager
-    def transaction(self) -> Iterator[sqlite_utils.Database]:
-        """A write transaction (``BEGIN IMMEDIATE``): commits on success, rolls back on any error.
-
-        SQLite errors (including at ``COMMIT``, such as a full disk) are raised translated.
-        """
+    def _in_transaction(self, begin: str) -> Iterator[None]:
+        """``begin``, then COMMIT on success and ROLLBACK on any error; SQLite errors (including
+        at ``COMMIT``, such as a full disk) are raised translated."""
         try:
-            self.db.execute("BEGIN IMMEDIATE")
+            self.db.execute(begin)
             try:
-                yield self.db
+                yield
                 self.db.execute("COMMIT")
             except BaseException:
                 if self.db.conn.in_transaction:
@@ -226,22 +224,21 @@ class MapDatabase:
             raise translate_sqlite_error(error, self.path) from error
 
     @contextmanager
+    def transaction(self) -> Iterator[sqlite_utils.Database]:
+        """A write transaction (``BEGIN IMMEDIATE``): commits on success, rolls back on any error.
+
+        SQLite errors (including at ``COMMIT``, such as a full disk) are raised translated.
+        """
+        with self._in_transaction("BEGIN IMMEDIATE"):
+            yield self.db
+
+    @contextmanager
     def reading(self) -> Iterator[MapDatabase]:
         """A read transaction: every read within sees the map as of one moment (a commit that
         lands meanwhile is seen whole after the block, not in part within it). Two writes
         (``map/add``, then ``map/connect``) are two commits: a snapshot may fall between them."""
-        try:
-            self.db.execute("BEGIN")
-            try:
-                yield self
-            except BaseException:
-                if self.db.conn.in_transaction:
-                    self.db.execute("ROLLBACK")
-                raise
-            if self.db.conn.in_transaction:
-                self.db.execute("COMMIT")
-        except sqlite3.Error as error:
-            raise translate_sqlite_error(error, self.path) from error
+        with self._in_transaction("BEGIN"):
+            yield self
 
     @_translated
     def schema_version(self) -> int:

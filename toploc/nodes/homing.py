@@ -50,7 +50,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -62,6 +62,8 @@ from toploc import bus
 from toploc.limits import Limits
 from toploc.nodes.node import Client, Node
 from toploc.runner import LocalizationRunner
+
+T = TypeVar("T")
 
 NODE_NAME = "homing"
 TIMEOUT = "timeout"
@@ -118,23 +120,22 @@ class _DriveRobot:
         if self.drive.ended is not None:
             raise _DriveEnded(self.drive.ended)
 
-    def capture(self) -> Capture:
+    def _unless_ended(self, call: Callable[[], T]) -> T:
+        """``call()``, first checking that the drive goes on. An error raised after the drive
+        was told to end is the end, not an error: the cancel or timeout stops the base, and a
+        stop that comes just before a move starts makes the base refuse it ("not moved")."""
         self._check()
         try:
-            return self.robot.capture()
+            return call()
         except Exception:
-            self._check()  # ended meanwhile: the base's complaint about the stop is not an error
-            raise
-
-    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
-        self._check()
-        try:
-            moved = self.robot.move(turn_rad, forward_m)
-        except Exception:
-            # a cancel or timeout stops the base; a stop that comes just before the move starts
-            # makes the base refuse it ("not moved"), which ends the drive, not an error
             self._check()
             raise
+
+    def capture(self) -> Capture:
+        return self._unless_ended(self.robot.capture)
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        moved = self._unless_ended(lambda: self.robot.move(turn_rad, forward_m))
         self.drive.steps += 1
         self.drive.distance_m += abs(moved.moved_m)
         return moved
