@@ -32,19 +32,32 @@ def match_descriptors(
     if len(query) == 0 or len(reference) < 2:
         return np.zeros((0, 2), dtype=np.int64)
     matcher = cv2.BFMatcher(cv2.NORM_L2)
-    pairs = matcher.knnMatch(
+    found = matcher.knnMatch(
         np.ascontiguousarray(query, np.float32), np.ascontiguousarray(reference, np.float32), k=2
     )
     kept = [
         (first.queryIdx, first.trainIdx, first.distance)
-        for first, second in (p for p in pairs if len(p) == 2)
+        for first, second in (p for p in found if len(p) == 2)
         if first.distance < ratio * second.distance
     ]
-    if not kept:
+    return _closest_claims(np.array(kept).reshape(-1, 3))
+
+
+def ratio_test_pairs(nearest: np.ndarray, distances: np.ndarray, ratio: float) -> np.ndarray:
+    """:func:`match_descriptors`' ratio test and cross-check on neighbours found elsewhere (an
+    approximate search): ``nearest`` (n, 2) int, each query row's two nearest reference rows
+    (-1: not found), at L2 ``distances`` (n, 2)."""
+    kept = np.flatnonzero((nearest[:, 1] >= 0) & (distances[:, 0] < ratio * distances[:, 1]))
+    return _closest_claims(np.column_stack([kept, nearest[kept, 0], distances[kept, 0]]))
+
+
+def _closest_claims(rows: np.ndarray) -> np.ndarray:
+    """From ``rows`` (k, 3) ``[query_row, reference_row, distance]`` in query-row order, the
+    pairs ``(m, 2)`` int64 whose query row is the closest to its reference row (ties: the first
+    row), sorted by query row."""
+    if len(rows) == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    rows = np.array(kept)
-    # Keep, for each reference row, only its closest query row.
-    order = np.lexsort((rows[:, 2], rows[:, 1]))
+    order = np.lexsort((rows[:, 2], rows[:, 1]))  # stable: equal distances keep row order
     rows = rows[order]
     first_of_reference = np.r_[True, rows[1:, 1] != rows[:-1, 1]]
     unique = rows[first_of_reference, :2].astype(np.int64)

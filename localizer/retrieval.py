@@ -100,7 +100,7 @@ class PlaceIndex:
             )
         k = min(self.params.neighbours, len(self._descriptors))
         k_search = min(2 * k if exclude is not None else k, len(self._descriptors))
-        rows, dist_sq = self._search(np.ascontiguousarray(descriptors), k_search)
+        rows, dist_sq = self.search(np.ascontiguousarray(descriptors), k_search)
         if exclude is not None:
             dropped = (rows < 0) | (self._keypoint_place[np.maximum(rows, 0)] == exclude)
             dist_sq = np.where(dropped, np.inf, dist_sq)
@@ -118,7 +118,7 @@ class PlaceIndex:
         np.add.at(scores, hit_place, 1.0 / places_hit[hit_query])
         return scores * self._weights
 
-    def _search(self, descriptors: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def search(self, descriptors: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """``(rows, dist_sq)`` (n, k) of the ``k`` approximate nearest map descriptors of each
         row of ``descriptors``; the rows split over ``params.threads`` threads (the search is
         read-only and releases the GIL, and each row's neighbours do not depend on the split)."""

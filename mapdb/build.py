@@ -114,6 +114,11 @@ def _at_line(entry: ManifestEntry, text: str) -> str:
     return f"line {entry.line}: {text}" if entry.line > 0 else text
 
 
+def _row(entry: ManifestEntry) -> str:
+    """How a message names another entry: its manifest line and image, or its image alone."""
+    return f"line {entry.line} ({entry.image})" if entry.line > 0 else entry.image
+
+
 def _pose(entry: ManifestEntry) -> tuple[str, float | None, float | None, float | None]:
     return (entry.room, entry.x_m, entry.y_m, entry.heading_deg)
 
@@ -122,7 +127,7 @@ def _conflict(entry: ManifestEntry, other: ManifestEntry) -> str:
     """Why two rows of the same image cannot both be right, naming both lines."""
     return _at_line(
         entry,
-        f"same image as line {other.line} ({other.image}) but in room {entry.room!r} at "
+        f"same image as {_row(other)} but in room {entry.room!r} at "
         f"{_pose(entry)[1:]} against room {other.room!r} at {_pose(other)[1:]}: conflicting "
         f"duplicates, neither is imported; keep the right row",
     )
@@ -158,7 +163,7 @@ def plan_jobs(
         elif sha not in first:
             first[sha] = entry
         elif _pose(first[sha]) == _pose(entry):
-            message = _at_line(entry, f"exact duplicate of line {first[sha].line}, skipped")
+            message = _at_line(entry, f"exact duplicate of {_row(first[sha])}, skipped")
             decided.append(Outcome(entry.image, Status.SKIPPED, message=message, warning=True))
         else:
             conflicting.setdefault(sha, entry)

@@ -92,20 +92,21 @@ def _csv_rows(path: Path) -> csv.DictReader[str]:
     return csv.DictReader(io.StringIO(_read_text(path), newline=""))
 
 
-def _inside(image: str, folder: Path, line: int, manifest: Path, allow_outside: bool) -> Path:
-    """``folder / image``; a :class:`ManifestError` if it resolves (through symbolic links, or
-    as an absolute path) to a file outside ``folder`` and ``allow_outside`` is False."""
+def _inside(image: str, folder: Path, where: str, source: Path, allow_outside: bool) -> Path:
+    """``folder / image``; a :class:`ManifestError` (saying ``where``, naming ``source``) if it
+    resolves (through symbolic links, or as an absolute path) to a file outside ``folder`` and
+    ``allow_outside`` is False."""
     if "\x00" in image:
-        raise ManifestError(f"{manifest} line {line}: image {image!r} has a NUL byte", manifest)
+        raise ManifestError(f"{where}: image {image!r} has a NUL byte", source)
     path = folder / image
     if allow_outside:
         return path
     resolved = path.resolve()
     if not resolved.is_relative_to(folder.resolve()):
         raise ManifestError(
-            f"{manifest} line {line}: image {image!r} lies outside the dataset folder "
+            f"{where}: image {image!r} lies outside the dataset folder "
             f"{folder} (it is {resolved}); move it in, or pass --allow-outside to `map build`",
-            manifest,
+            source,
         )
     return path
 
@@ -126,7 +127,7 @@ def _entry(
             f"{manifest} line {line}: give both 'x_m' and 'y_m' or leave both empty", manifest
         )
     heading_deg = _optional_float(row["heading_deg"], "heading_deg", line, manifest)
-    path = _inside(image, folder, line, manifest, allow_outside)
+    path = _inside(image, folder, f"{manifest} line {line}", manifest, allow_outside)
     return ManifestEntry(image, path, room, x_m, y_m, heading_deg, line)
 
 
@@ -159,6 +160,73 @@ def read_manifest(dataset_dir: Path | str, allow_outside: bool = False) -> list[
         return [_entry(row, reader.line_num, folder, manifest, allow_outside) for row in reader]
     except csv.Error as error:
         raise ManifestError(f"{manifest} line {reader.line_num}: {error}", manifest) from None
+
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
+"""File name endings (any case) that a folder of room sub-folders is read for."""
+
+
+def read_dataset(dataset_dir: Path | str, allow_outside: bool = False) -> list[ManifestEntry]:
+    """The panoramas of a dataset folder: its ``manifest.csv`` (:func:`read_manifest`) if it has
+    one, else its room sub-folders (:func:`read_room_folders`)."""
+    folder = Path(dataset_dir)
+    if (folder / MANIFEST_NAME).exists() or not folder.is_dir():
+        return read_manifest(folder, allow_outside)
+    return read_room_folders(folder, allow_outside)
+
+
+def _is_image_name(name: str) -> bool:
+    # Hidden files are skipped: macOS writes "._IMG_0001.JPG" resource forks beside photos.
+    return not name.startswith(".") and name.lower().endswith(IMAGE_SUFFIXES)
+
+
+def read_room_folders(dataset_dir: Path | str, allow_outside: bool = False) -> list[ManifestEntry]:
+    """One entry per image file (:data:`IMAGE_SUFFIXES`) in each sub-folder of ``dataset_dir``,
+    whose name is the image's room; no pose (``x_m``, ``y_m``, ``heading_deg`` None; ``line``
+    0). Sorted by room, then file name. This is how photos from a 360° camera are usually kept:
+    ``house/kitchen/IMG_0001.JPG``.
+
+    Raises :class:`ManifestError` naming the folder when it holds images directly (their room
+    is unknown), when no sub-folder holds an image, when a sub-folder's name is not a valid
+    room name, or when an image resolves outside the folder (unless ``allow_outside``).
+    """
+    folder = Path(dataset_dir)
+    if not folder.is_dir():
+        raise ManifestError(f"dataset folder {folder} does not exist", folder)
+    loose = sorted(p.name for p in folder.iterdir() if _is_image_name(p.name) and not p.is_dir())
+    if loose:
+        raise ManifestError(
+            f"{folder} has no {MANIFEST_NAME} and holds images directly ({', '.join(loose[:3])}"
+            f"{', ...' if len(loose) > 3 else ''}): put each room's panoramas in a sub-folder "
+            f"named after the room, or write a {MANIFEST_NAME}",
+            folder,
+        )
+    entries = []
+    for room_dir in sorted(
+        p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".")
+    ):
+        images = sorted(
+            p.name for p in room_dir.iterdir() if _is_image_name(p.name) and not p.is_dir()
+        )
+        if images:
+            try:
+                check_name(room_dir.name)
+            except ValueError as error:
+                raise ManifestError(
+                    f"{room_dir}: the folder's name is the room's: {error}", room_dir
+                ) from None
+        for name in images:
+            image = f"{room_dir.name}/{name}"
+            path = _inside(image, folder, str(folder), folder, allow_outside)
+            entries.append(ManifestEntry(image, path, room_dir.name, None, None, None, 0))
+    if not entries:
+        raise ManifestError(
+            f"{folder} has no {MANIFEST_NAME} and no room sub-folder with images "
+            f"({', '.join(IMAGE_SUFFIXES)}): a dataset is a {MANIFEST_NAME} "
+            f"(image,room,x_m,y_m,heading_deg) or one sub-folder of panoramas per room",
+            folder,
+        )
+    return entries
 
 
 def read_edges(dataset_dir: Path | str) -> list[tuple[str, str]]:

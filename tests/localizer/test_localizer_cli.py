@@ -91,6 +91,21 @@ def test_eval_localize_counts_a_room_the_map_lacks(building_map, tmp_path):
     assert "rooms not in the map (attic)" in result.output
 
 
+def test_eval_localize_reads_one_sub_folder_per_room_without_a_manifest(building_map, tmp_path):
+    db_path, dataset = building_map
+    queries = tmp_path / "photos"
+    for room, image in (("kitchen", "kitchen_003.png"), ("attic", "kitchen_000.png")):
+        (queries / room).mkdir(parents=True)
+        shutil.copy(dataset / "images" / image, queries / room / "IMG_0001.PNG")
+    out = tmp_path / "score.json"
+    result = run("eval", "localize", queries, "--db", db_path, "--json", out, "--no-progress")
+    assert result.exit_code == 0, result.output
+    score = json.loads(out.read_text())
+    assert score["n"] == 2
+    assert score["per_room"]["kitchen"]["top1"] == 1.0
+    assert score["unknown_room"]["rooms"] == ["attic"]
+
+
 def test_eval_localize_leave_one_out_needs_no_dataset_and_plots(building_map, tmp_path):
     plot = tmp_path / "calibration.png"
     result = run(

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from localizer.matching import match_descriptors
+from localizer.matching import match_descriptors, ratio_test_pairs
 
 
 def _descriptors(n: int, seed: int = 0) -> np.ndarray:
@@ -36,3 +36,17 @@ def test_empty_sides_give_no_matches():
 def test_mismatched_widths_are_rejected_with_both_shapes():
     with pytest.raises(ValueError, match=r"\(3, 64\)"):
         match_descriptors(_descriptors(3)[:, :64], _descriptors(3))
+
+
+def test_the_ratio_test_keeps_distinct_rows_and_the_closest_claim_of_a_reference_row():
+    nearest = np.array([[3, 1], [3, 0], [2, -1], [5, 4], [6, 7]])
+    distances = np.array([[0.2, 1.0], [0.1, 1.0], [0.1, np.inf], [0.9, 1.0], [0.3, 1.0]])
+    pairs = ratio_test_pairs(nearest, distances, ratio=0.8)
+    # row 0 loses reference row 3 to the closer row 1; row 2 has no second neighbour; row 3
+    # is not distinct (0.9 >= 0.8 x 1.0)
+    assert pairs.tolist() == [[1, 3], [4, 6]]
+
+
+def test_the_ratio_test_of_no_rows_gives_no_pairs():
+    pairs = ratio_test_pairs(np.zeros((0, 2), np.int64), np.zeros((0, 2)), ratio=0.8)
+    assert pairs.shape == (0, 2) and pairs.dtype == np.int64

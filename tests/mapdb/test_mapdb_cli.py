@@ -41,6 +41,20 @@ def test_build_then_rerun_is_idempotent(make_dataset, db_path: Path) -> None:
 
 
 @pytest.mark.usefixtures("fake_extractor")
+def test_build_from_one_sub_folder_per_room(tmp_path: Path, db_path: Path) -> None:
+    photos = tmp_path / "photos"
+    for i, room in enumerate(("kitchen", "kitchen", "hall")):
+        write_image(photos / room / f"IMG_{i:04d}.JPG", seed=i)
+    result = build(photos, db_path, "--workers", "0")
+    assert result.exit_code == 0, result.output
+    assert "added 3, skipped 0, failed 0" in result.stdout
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        places = map_db.places()
+    assert sorted(p.room for p in places) == ["hall", "kitchen", "kitchen"]
+    assert {(p.x_m, p.y_m, p.heading_deg) for p in places} == {(None, None, None)}
+
+
+@pytest.mark.usefixtures("fake_extractor")
 def test_build_connects_the_rooms_listed_in_edges_csv(make_dataset, db_path: Path) -> None:
     dataset = make_dataset(3)
     (dataset / "edges.csv").write_text("room_a,room_b\nhall,kitchen\n")

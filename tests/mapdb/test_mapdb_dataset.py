@@ -1,4 +1,5 @@
-"""Reading manifest.csv: columns, optional pose, and errors naming file, line and column."""
+"""Reading a dataset: manifest.csv (columns, optional pose, errors naming file, line and column)
+or one sub-folder of panoramas per room."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mapdb.dataset import read_edges, read_manifest, sha256_file
+from mapdb.dataset import read_dataset, read_edges, read_manifest, read_room_folders, sha256_file
 from mapdb.errors import ManifestError
 
 
@@ -62,6 +63,63 @@ def test_missing_manifest_and_folder_are_named(tmp_path: Path) -> None:
         read_manifest(tmp_path / "empty")
     with pytest.raises(ManifestError, match=r"dataset folder .*nowhere does not exist"):
         read_manifest(tmp_path / "nowhere")
+
+
+def write_files(folder: Path, *names: str) -> Path:
+    for name in names:
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_bytes(b"not decoded here")
+    return folder
+
+
+def test_room_folders_give_one_entry_per_image_without_pose(tmp_path: Path) -> None:
+    folder = write_files(
+        tmp_path / "house",
+        "kitchen/IMG_0002.JPG", "kitchen/IMG_0001.jpg", "hall/a.png", "hall/notes.txt",
+        "hall/._a.png", ".thumbnails/x.jpg", "empty_room/readme.md",
+    )  # fmt: skip
+    entries = read_room_folders(folder)
+    assert [(e.image, e.room) for e in entries] == [
+        ("hall/a.png", "hall"),
+        ("kitchen/IMG_0001.jpg", "kitchen"),
+        ("kitchen/IMG_0002.JPG", "kitchen"),
+    ]
+    assert entries[0].path == folder / "hall" / "a.png"
+    assert {(e.x_m, e.y_m, e.heading_deg, e.line) for e in entries} == {(None, None, None, 0)}
+
+
+def test_read_dataset_prefers_the_manifest(tmp_path: Path) -> None:
+    folder = write_files(tmp_path / "ds", "kitchen/a.jpg")
+    assert [e.room for e in read_dataset(folder)] == ["kitchen"]
+    write_manifest(folder, "image,room,x_m,y_m,heading_deg\nkitchen/a.jpg,pantry,1,2,0\n")
+    assert [e.room for e in read_dataset(folder)] == ["pantry"]
+
+
+def test_images_outside_room_folders_are_refused_naming_them(tmp_path: Path) -> None:
+    folder = write_files(tmp_path / "ds", "kitchen/a.jpg", "b.jpg")
+    with pytest.raises(ManifestError, match=r"holds images directly \(b\.jpg\): put each room"):
+        read_dataset(folder)
+
+
+def test_a_folder_without_manifest_or_room_images_says_what_a_dataset_is(tmp_path: Path) -> None:
+    folder = write_files(tmp_path / "ds", "kitchen/notes.txt")
+    with pytest.raises(ManifestError, match=r"no manifest\.csv and no room sub-folder with images"):
+        read_dataset(folder)
+
+
+def test_a_room_folder_whose_name_is_no_room_name_is_named(tmp_path: Path) -> None:
+    folder = write_files(tmp_path / "ds", "bad\troom/a.jpg")
+    with pytest.raises(ManifestError, match=r"bad\\troom.*control character"):
+        read_room_folders(folder)
+
+
+def test_a_room_image_linked_from_outside_is_refused_unless_allowed(tmp_path: Path) -> None:
+    outside = write_files(tmp_path / "elsewhere", "a.jpg") / "a.jpg"
+    folder = write_files(tmp_path / "ds", "kitchen/b.jpg")
+    (folder / "kitchen" / "a.jpg").symlink_to(outside)
+    with pytest.raises(ManifestError, match=r"image 'kitchen/a\.jpg' lies outside"):
+        read_room_folders(folder)
+    assert len(read_room_folders(folder, allow_outside=True)) == 2
 
 
 def test_sha256_file_matches_hashlib(tmp_path: Path) -> None:

@@ -93,6 +93,16 @@ def nodes(*commands: tuple[str, ...]) -> Iterator[list[Node]]:
             node.stop()
 
 
+def diagnosis(belief: dict, running: list[Node]) -> str:
+    """What a failed wait shows: the last belief, then each node's output with its threads'
+    stacks (``SIGUSR1``) at that moment."""
+    for node in running:
+        if node.process.poll() is None:
+            node.process.send_signal(signal.SIGUSR1)
+    time.sleep(2.0)  # the stacks reach the output
+    return "\n\n".join([str(belief), *("\n".join(node.output) for node in running)])
+
+
 def client_session(endpoint: str, robot_id: str):
     return bus.open_session(bus.BusConfig(robot_id, listen=(), connect=(endpoint,)))
 
@@ -126,7 +136,7 @@ def test_robot_map_and_localizer_nodes_in_three_processes(building_map, tmp_path
             if belief["best_place"]["place_id"] == added["place_id"]:
                 break
             time.sleep(0.5)
-        assert belief["best_place"]["place_id"] == added["place_id"], belief
+        assert belief["best_place"]["place_id"] == added["place_id"], diagnosis(belief, running)
         assert "annex" in belief["rooms"]
     codes = [node.process.returncode for node in running]
     assert codes == [0, 0, 0], "\n\n".join("\n".join(node.output) for node in running)

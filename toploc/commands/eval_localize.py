@@ -59,7 +59,8 @@ def localize_command(
     plot_path: Path | None,
     progress: bool,
 ) -> None:
-    """Localize every panorama of DATASET (a folder with manifest.csv) against the map.
+    """Localize every panorama of DATASET against the map: a folder with manifest.csv, or one
+    sub-folder of panoramas per room (named after the room).
 
     Prints each query's outcome counted in five: right and localized, right but ambiguous,
     wrong and localized (confidently wrong), wrong and ambiguous, lost; top-1 room accuracy

@@ -31,8 +31,8 @@ from mapdb.dataset import (
     EDGES_NAME,
     ManifestEntry,
     check_edge_rooms,
+    read_dataset,
     read_edge_rows,
-    read_manifest,
 )
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
@@ -176,7 +176,8 @@ def build_command(
     progress: bool,
     verbose: bool,
 ) -> None:
-    """Import the panoramas of DATASET (a folder with manifest.csv) into the map.
+    """Import the panoramas of DATASET into the map: a folder with manifest.csv, or without
+    one, a folder with one sub-folder of panoramas per room (named after the room; no poses).
 
     Images already in the map (same SHA-256) are skipped; re-run after an interruption to finish.
     An optional edges.csv (room_a,room_b) beside the manifest adds the room graph's edges.
@@ -185,7 +186,7 @@ def build_command(
     """
     presets = parse_detectors(detectors)
     with _sigterm_as_interrupt(), _map_errors():
-        entries = read_manifest(dataset, allow_outside=allow_outside)
+        entries = read_dataset(dataset, allow_outside=allow_outside)
         edge_rows = read_edge_rows(dataset)
         edges = [(a, b) for a, b, _ in edge_rows]
         with MapDatabase.open(db_path) as map_db:

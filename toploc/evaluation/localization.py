@@ -25,7 +25,7 @@ from tqdm import tqdm
 from localizer.belief import RoomBelief
 from localizer.localizer import Localizer, Observation
 from localizer.panorama_io import read_panorama
-from mapdb.dataset import read_manifest
+from mapdb.dataset import read_dataset
 from toploc.evaluation.reliability import Reliability, reliability
 
 OUTCOMES = ("right_localized", "right_ambiguous", "wrong_localized", "wrong_ambiguous", "lost")
@@ -274,14 +274,15 @@ class LocalizationRun:
 def localize_dataset(
     localizer: Localizer, dataset_dir: Path | str, progress: bool = False
 ) -> LocalizationRun:
-    """Localize every panorama of ``dataset_dir`` (a folder with ``manifest.csv``) once.
+    """Localize every panorama of ``dataset_dir`` once: a folder with ``manifest.csv``, or one
+    sub-folder of panoramas per room (:func:`mapdb.dataset.read_dataset`).
 
-    The true room of a query is its manifest row's. A bad manifest raises
+    The true room of a query is its manifest row's (its sub-folder's). A bad manifest raises
     :class:`mapdb.errors.ManifestError`, an unreadable image
     :class:`localizer.panorama_io.PanoramaError`, both naming the file.
     """
     outcomes = []
-    entries = read_manifest(dataset_dir)
+    entries = read_dataset(dataset_dir)
     for entry in tqdm(entries, desc="localize", unit="pano", disable=not progress):
         belief, observation = localizer.localize_once(read_panorama(entry.path))
         outcomes.append(query_outcome(entry.image, entry.room, belief, observation))
