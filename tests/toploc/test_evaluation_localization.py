@@ -161,3 +161,21 @@ def test_no_queries_is_an_error():
 def test_the_confusion_table_has_a_row_per_true_room():
     text = format_confusion(CONFUSION)
     assert text.splitlines()[1].split() == ["hall", "2", "0"]
+
+
+def test_a_confusion_too_wide_for_a_table_lists_what_each_room_was_taken_for():
+    rooms = [f"brown_photostudio_{i:02d}" for i in range(8)]
+    confusion = {t: {p: int(t == p) + 2 * (p == rooms[0]) for p in rooms} for t in rooms}
+    lines = format_confusion(confusion, max_width=120).splitlines()
+    assert len(lines) == 1 + len(rooms)
+    assert lines[2] == "  brown_photostudio_01: brown_photostudio_00 (2), brown_photostudio_01 (1)"
+    assert max(len(line) for line in lines) <= 120
+
+
+def test_per_room_columns_stay_aligned_with_long_room_names():
+    long_room = "sepulchral_chapel_rotunda"
+    score = score_localization(
+        [outcome("hall", "hall", "localized"), outcome(long_room, "hall", "lost")], MAP_ROOMS
+    )
+    lines = format_per_room(score).splitlines()
+    assert len({len(line) for line in lines}) == 1, lines  # every column ends where its header does

@@ -158,3 +158,78 @@ def _camera(
             camera_height_m = make_world(world_name, seed).camera_height_m
     kind = cast("Projection", projection)
     return PanoramaCamera(width_px, height_px, height_m=camera_height_m, projection=kind)
+
+
+@dataset.command("perturb")
+@click.argument("source", type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.argument("out", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--rooms", default=None, help="Rooms to copy, comma-separated [default: all].")
+@click.option(
+    "--roll-deg",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Turn every panorama by this yaw (column 0 moves clockwise; headings follow).",
+)
+@click.option("--random-roll", is_flag=True, help="A seeded random roll per image instead.")
+@click.option(
+    "--width",
+    "width_px",
+    type=click.IntRange(min=16),
+    default=None,
+    help="Resize to this width, the aspect kept [default: as is].",
+)
+@click.option(
+    "--condition",
+    type=click.Choice(list(CONDITIONS)),
+    default="default",
+    show_default=True,
+    help="Lighting and sensor noise (added objects do not apply to an image).",
+)
+@click.option(
+    "--jpeg-quality",
+    type=click.IntRange(1, 100),
+    default=90,
+    show_default=True,
+    help="JPEG quality of the copies.",
+)
+@click.option("--png", is_flag=True, help="Write lossless PNG copies instead of JPEG.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seeds rolls and noise.")
+@click.option("--overwrite", is_flag=True, help="Replace the dataset in a non-empty OUT.")
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
+def perturb(
+    source: Path,
+    out: Path,
+    rooms: str | None,
+    roll_deg: float,
+    random_roll: bool,
+    width_px: int | None,
+    condition: str,
+    jpeg_quality: int,
+    png: bool,
+    seed: int,
+    overwrite: bool,
+    progress: bool,
+) -> None:
+    """Copy the panoramas of SOURCE (a manifest, or one sub-folder per room) into OUT, each
+    turned in yaw, resized and under a capture condition: views of the same places that a map
+    built from SOURCE did not store (e.g. from real 360° photos with one capture point each)."""
+    from localizer.panorama_io import PanoramaError
+    from mapdb.dataset import read_manifest
+    from mapdb.errors import ManifestError
+    from robot.conditions import get_condition
+    from robot.perturb import Perturbation, perturb_dataset
+
+    names = None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
+    perturbation = Perturbation(
+        roll_deg=None if random_roll else roll_deg,
+        width_px=width_px,
+        condition=get_condition(condition),
+        jpeg_quality=None if png else jpeg_quality,
+    )
+    try:
+        manifest = perturb_dataset(source, out, perturbation, names, seed, overwrite, progress)
+    except (ValueError, ManifestError, PanoramaError, OSError) as error:
+        raise click.ClickException(str(error)) from error
+    rows = read_manifest(manifest.parent)
+    click.echo(f"wrote {len(rows)} panoramas and {manifest}")

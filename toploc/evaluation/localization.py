@@ -319,10 +319,18 @@ def _share(flags: Any) -> float:
     return sum(values) / len(values)
 
 
-def format_confusion(confusion: Mapping[str, Mapping[str, int]]) -> str:
-    """The confusion matrix as a text table (rows: true room, columns: predicted)."""
+def format_confusion(confusion: Mapping[str, Mapping[str, int]], max_width: int = 120) -> str:
+    """The confusion matrix as a text table (rows: true room, columns: predicted); when that
+    would be wider than ``max_width`` characters (many rooms, long names), one line per true
+    room listing only the rooms it was taken for."""
     columns = list(dict.fromkeys(p for row in confusion.values() for p in row))
     width = max(len(c) for c in [*columns, *confusion, "true \\ predicted"]) + 1
+    if width * (len(columns) + 1) > max_width:
+        lines = ["true room: predicted room (count), ..."]
+        for true_room, row in confusion.items():
+            taken = [f"{room} ({n})" for room, n in sorted(row.items(), key=lambda r: -r[1]) if n]
+            lines.append(f"  {true_room}: {', '.join(taken) or '-'}")
+        return "\n".join(lines)
     lines = ["true \\ predicted".ljust(width) + "".join(c.rjust(width) for c in columns)]
     for true_room, row in confusion.items():
         cells = "".join(str(row.get(c, 0)).rjust(width) for c in columns)

@@ -46,14 +46,18 @@ def format_outcomes(score: LocalizationScore) -> str:
 def format_per_room(score: LocalizationScore) -> str:
     """One line per true room: n, the count of each outcome, top-1 and the share ambiguous;
     rooms the map lacks are marked."""
+    names = {
+        room: room if score.per_room_outcomes[room].in_map else f"{room} (not in map)"
+        for room in score.per_room
+    }
+    width = max(18, *(len(name) for name in names.values()))
     header = "".join(f"{SHORT_LABELS[o]:>6s}" for o in OUTCOMES)
-    lines = [f"  {'true room':18s} {'n':>4s}{header} {'top-1':>7s} {'ambig.':>7s}"]
+    lines = [f"  {'true room':{width}s} {'n':>4s}{header} {'top-1':>7s} {'ambig.':>7s}"]
     for room, row in score.per_room.items():
-        counts = score.per_room_outcomes[room]
-        name = room if counts.in_map else f"{room} (not in map)"
-        cells = "".join(f"{counts.counts[o]:6d}" for o in OUTCOMES)
+        cells = "".join(f"{score.per_room_outcomes[room].counts[o]:6d}" for o in OUTCOMES)
         lines.append(
-            f"  {name:18s} {row['n']:4.0f}{cells} {row['top1']:7.1%} {row['ambiguous_rate']:7.1%}"
+            f"  {names[room]:{width}s} {row['n']:4.0f}{cells} {row['top1']:7.1%} "
+            f"{row['ambiguous_rate']:7.1%}"
         )
     return "\n".join(lines)
 
