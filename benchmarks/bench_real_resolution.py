@@ -20,8 +20,8 @@ leaving out the capture points (those coincide with map places). One warm-up que
 
 Widths: ``1024`` is the product's default (an equirect image is shrunk to ``max_width_px`` 1024
 before SIFT, ``localizer.features.CAMERA_DEFAULTS``); ``2048`` is full resolution, map and
-queries both (``max_width_px=2048``). ``LocalizerConfig`` has no extraction override, so the
-full-resolution query goes through a subclass of ``Localizer`` whose ``extract`` passes it.
+queries both: the map is built with ``max_width_px=2048`` (``toploc map build --read-width
+2048``), and the localizer reads its queries as the map's places were read.
 
 Extraction on both cores: the localizer detects a query's two halves (with the wrap margin of
 overlap) on two threads (``LocalizerConfig.extraction_threads = 2``); retrieval, matching and
@@ -38,7 +38,6 @@ so the ratio can be read against both.
 from __future__ import annotations
 
 import argparse
-import functools
 import multiprocessing
 import os
 import shutil
@@ -58,7 +57,7 @@ from scipy.spatial import cKDTree
 
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig, to_grey
+from localizer.localizer import Localizer, LocalizerConfig
 from localizer.panorama_io import read_panorama
 from mapdb.build import Extractor, build_map
 from mapdb.database import MapDatabase
@@ -95,30 +94,6 @@ def recovered(product: Fingerprint, other: Fingerprint) -> float:
 # --- localizers at a chosen width ------------------------------------------------------------
 
 
-class WidthLocalizer(Localizer):
-    """A :class:`Localizer` whose extraction reads the panorama at ``max_width_px`` (None: the
-    product's camera default) on ``threads`` threads (the product's default: 2)."""
-
-    def __init__(self, loaded: LoadedMap, max_width_px: int | None, threads: int = 2) -> None:
-        super().__init__(loaded, LocalizerConfig(extraction_threads=threads))
-        self.max_width_px = max_width_px
-
-    def extract(self, image: np.ndarray) -> Fingerprint:
-        if self.max_width_px is None:
-            return super().extract(image)
-        return extract_with_camera(
-            to_grey(image), CameraSpec(), "sift", threads=self.config.extraction_threads,
-            max_width_px=self.max_width_px,
-        )  # fmt: skip
-
-
-def extract_at_width(path: Path, max_width_px: int) -> list[Fingerprint]:
-    """The map builder's extractor at ``max_width_px`` (``resolve_extractor`` has no override)."""
-    cv2.setNumThreads(1)  # one process per core already, as the product's extractor
-    image = read_panorama(path)
-    return [extract_with_camera(image, CameraSpec(), "sift", max_width_px=max_width_px)]
-
-
 # --- maps and queries ------------------------------------------------------------------------
 
 
@@ -142,11 +117,8 @@ def build_maps(
     entries: Sequence[ManifestEntry], sizes: Sequence[int], width: int, cache: Path
 ) -> dict[int, Path]:
     """SQLite maps of the first ``size`` entries, each grown from the previous one's copy."""
-    extractor: Extractor = (
-        resolve_extractor(("sift",))
-        if width == DEFAULT_WIDTH
-        else functools.partial(extract_at_width, max_width_px=width)
-    )
+    overrides = {} if width == DEFAULT_WIDTH else {"max_width_px": width}  # --read-width
+    extractor: Extractor = resolve_extractor(("sift",), overrides=overrides)
     paths, previous = {}, None
     for size in sorted(sizes):
         path = cache / f"map_w{width}_{size}.db"
@@ -198,7 +170,7 @@ def time_map(
 ) -> RunResult:
     """Load the map at ``db`` and time ``observe`` on every query (path, room); the first twice."""
     loaded = load_map(db)
-    localizer = WidthLocalizer(loaded, None if width == DEFAULT_WIDTH else width, threads)
+    localizer = Localizer(loaded, LocalizerConfig(extraction_threads=threads))
     load_rss = rss_mib()
     images = [(read_panorama(path), room) for path, room in queries]
     localizer.observe(images[0][0])  # warm-up

@@ -212,13 +212,19 @@ def matching_overrides(record: Mapping[str, Any]) -> dict[str, Any]:
     """The extraction settings a query must take from a stored fingerprint's ``record``
     (its ``params``) to be comparable with it: the contrast equalisation and the keypoint cap,
     which change which keypoints are found (:meth:`ExtractionParams.from_record`: a record from
-    before the equalisation means none, and one without ``max_keypoints`` no cap)."""
+    before the equalisation means none, and one without ``max_keypoints`` no cap), and the width
+    the place was read at, if it was shrunk (``toploc map build --read-width``; a record
+    without one leaves the query's camera default: a cylinder map can be queried with a
+    2048-wide sphere, read at 1024)."""
     stored = ExtractionParams.from_record(record)
-    return {
+    overrides: dict[str, Any] = {
         "clahe_clip_limit": stored.clahe_clip_limit,
         "clahe_band_deg": stored.clahe_band_deg,
         "max_keypoints": stored.max_keypoints,
     }
+    if stored.max_width_px is not None:
+        overrides["max_width_px"] = stored.max_width_px
+    return overrides
 
 
 def _check_image(image: np.ndarray) -> np.ndarray:

@@ -70,7 +70,8 @@ def test_a_photo_at_a_quarter_of_the_light_keeps_its_keypoints_only_when_equalis
 def test_a_record_without_the_contrast_fields_means_no_equalisation() -> None:
     new = extract_with_camera(photo(), CameraSpec(), "sift")
     assert matching_overrides(new.params) == {
-        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": 1000
+        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": 1000,
+        "max_width_px": 1024,  # the equirectangular default
     }  # fmt: skip
     assert matching_overrides(unequalised_record(new).params)["clahe_clip_limit"] == 0.0
 
@@ -110,3 +111,18 @@ def test_a_new_place_follows_the_places_already_in_the_map(tmp_path: Path) -> No
         assert map_overrides(map_db) == {}  # an empty map: the defaults
         map_db.add_place(NewPlace("vestibule", "ab" * 32, "a.png"), [old])
         assert map_overrides(map_db)["clahe_clip_limit"] == 0.0
+
+
+def test_a_query_is_read_at_the_width_the_map_s_places_were_read_at() -> None:
+    wide = cv2.resize(photo(), (1536, 768), interpolation=cv2.INTER_CUBIC)
+    place = extract_with_camera(wide, CameraSpec(), "sift", max_width_px=1536)
+    query = _localizer([place]).extract(wide)
+    assert query.params["max_width_px"] == 1536
+    assert query.keypoints_xy[:, 0].max() > 1024  # in the full-width image's pixels
+
+
+def test_a_cylinder_map_leaves_a_sphere_query_at_its_camera_s_width() -> None:
+    cylinder = extract_with_camera(photo()[64:192], CameraSpec(), "sift")
+    assert "max_width_px" not in matching_overrides(cylinder.params)
+    query = _localizer([cylinder]).extract(cv2.resize(photo(), (2048, 1024)))
+    assert query.params["max_width_px"] == 1024

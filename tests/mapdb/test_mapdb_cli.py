@@ -244,6 +244,26 @@ def test_build_with_real_extraction(tmp_path: Path, db_path: Path) -> None:
     assert_consistent(db_path)
 
 
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_a_map_read_at_a_chosen_width_keeps_it_and_refuses_another(tmp_path, db_path) -> None:
+    photos = tmp_path / "photos"
+    write_image(photos / "lab" / "a.png", 1, size_px=(1200, 600))  # 2:1, a sphere
+    write_image(photos / "lab" / "b.png", 2, size_px=(1200, 600))
+    first = build(photos, db_path, "--workers", "0", "--read-width", "1200", "--no-calibrate")
+    assert first.exit_code == 0, first.output
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert map_db.stored_params()["max_width_px"] == 1200  # not the sphere's default 1024
+    write_image(photos / "lab" / "c.png", 3, size_px=(1200, 600))
+    other = build(photos, db_path, "--workers", "0", "--read-width", "1024", "--no-calibrate")
+    assert other.exit_code == 2
+    assert "--read-width 1024: the map's places were read shrunk to 1200 px" in other.output
+    follows = build(photos, db_path, "--workers", "0", "--no-calibrate")
+    assert "added 1, skipped 2" in follows.stdout
+    with sqlite3.connect(db_path) as conn:
+        rows = conn.execute("SELECT params_json FROM fingerprints").fetchall()
+    assert {json.loads(params)["max_width_px"] for (params,) in rows} == {1200}
+
+
 def test_info_names_the_rooms_with_one_place(filled_map: MapDatabase, db_path: Path) -> None:
     text = run("info", "--db", db_path).stdout
     (hint,) = [line for line in text.splitlines() if "one place only" in line]

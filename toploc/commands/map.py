@@ -20,6 +20,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import click
 from tqdm import tqdm
@@ -125,6 +126,18 @@ calibrate_option = click.option(
     show_default=True,
     help="Fit the likelihood on the map's own places afterwards (see `toploc map calibrate`).",
 )
+read_width_option = click.option(
+    "--read-width",
+    "read_width_px",
+    type=click.IntRange(min=8),
+    default=None,
+    help=(
+        "Shrink panoramas wider than this many pixels before detection [default: the "
+        "camera's: 1024 for a sphere, none for a cylinder]. The map keeps it: its queries and "
+        "later places are read the same way (2048: a 2048 x 1024 camera at full size, slower "
+        "and more detail)."
+    ),
+)
 detector_option = click.option(
     "--detector",
     "detectors",
@@ -151,6 +164,7 @@ def map_group() -> None:
     help="Extraction processes (0 or 1: in this process).",
 )
 @camera_option
+@read_width_option
 @calibrate_option
 @click.option(
     "--allow-outside",
@@ -170,6 +184,7 @@ def build_command(
     detectors: str,
     workers: int,
     camera: str,
+    read_width_px: int | None,
     calibrate: bool,
     allow_outside: bool,
     create_rooms: bool,
@@ -196,7 +211,7 @@ def build_command(
             report = build_map(
                 map_db,
                 entries,
-                resolve_extractor(presets, camera, map_overrides(map_db)),
+                resolve_extractor(presets, camera, _overrides(map_db, read_width_px)),
                 workers=workers,
                 progress=progress,
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
@@ -221,6 +236,7 @@ def build_command(
 @click.option("--heading-deg", type=float, default=None, help="Heading in the room, degrees CCW.")
 @detector_option
 @camera_option
+@read_width_option
 @calibrate_option
 def add_command(
     image: Path,
@@ -231,6 +247,7 @@ def add_command(
     heading_deg: float | None,
     detectors: str,
     camera: str,
+    read_width_px: int | None,
     calibrate: bool,
 ) -> None:
     """Add one panorama IMAGE as a place of ROOM (the room is created if new)."""
@@ -246,7 +263,7 @@ def add_command(
     presets = parse_detectors(detectors)
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
-        extractor = resolve_extractor(presets, camera, map_overrides(map_db))
+        extractor = resolve_extractor(presets, camera, _overrides(map_db, read_width_px))
         report = build_map(map_db, [entry], extractor, workers=0, progress=False)
     (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
     if outcome.status is Status.FAILED:
@@ -283,6 +300,23 @@ def calibrate_command(db_path: Path, detectors: str | None, progress: bool) -> N
                 raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
             detectors = ",".join(held)
         _calibrate(db_path, parse_detectors(detectors), progress)
+
+
+def _overrides(map_db: MapDatabase, read_width_px: int | None) -> dict[str, Any]:
+    """The extraction settings a new place takes (:func:`toploc.extraction.map_overrides`),
+    with ``--read-width``: a new map takes it, a map whose places were read otherwise refuses
+    it (one map reads all its places, and its queries, one way)."""
+    overrides = map_overrides(map_db)
+    if read_width_px is None:
+        return overrides
+    if map_db.stored_params() is not None and overrides.get("max_width_px") != read_width_px:
+        stored = overrides.get("max_width_px")
+        how = f"shrunk to {stored} px" if stored else "at their full width"
+        raise click.UsageError(
+            f"--read-width {read_width_px}: the map's places were read {how}, and a map reads "
+            f"all its places one way; leave --read-width out to follow the map"
+        )
+    return {**overrides, "max_width_px": read_width_px}
 
 
 def _calibrate(db_path: Path, presets: tuple[str, ...], progress: bool) -> None:
