@@ -10,6 +10,7 @@ keeps the Bayes filter over rooms. Both hold no open database handle.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -100,6 +101,11 @@ class LoadedMap:
                 else RatioLikelihood.from_json(snapshot.likelihood)
             ),
         )
+
+    @cached_property
+    def places_per_room(self) -> Counter[str]:
+        """How many places of each room the table holds (a room without any: 0)."""
+        return Counter(self.table.rooms)
 
     @cached_property
     def _index_of(self) -> dict[int, int]:
@@ -242,12 +248,22 @@ class Localizer:
         belief = RoomBelief.from_probabilities(
             self.map.rooms,
             self.filter.probabilities,
-            replace(self.config.thresholds, lost_min_inliers=self.likelihood.min_inliers),
+            self._thresholds(self.filter.probabilities),
             evidence,
             stamp_s=time.time(),
             count=self.likelihood.count,
         )
         return belief if state is None else belief.with_state(state)
+
+    def _thresholds(self, probabilities: np.ndarray) -> StateThresholds:
+        """The configured thresholds with the likelihood's lost test, and the stricter
+        ``one_place_ratio`` when the most likely room has fewer than two places in the map."""
+        thresholds = replace(self.config.thresholds, lost_min_inliers=self.likelihood.min_inliers)
+        top_room = self.map.rooms[int(np.argmax(probabilities))]
+        if self.map.places_per_room[top_room] < 2:
+            ratio = max(thresholds.localized_ratio, thresholds.one_place_ratio)
+            thresholds = replace(thresholds, localized_ratio=ratio)
+        return thresholds
 
     def localize_once(self, image: np.ndarray) -> tuple[RoomBelief, Observation]:
         """One-shot: uniform prior, one update with ``image``."""

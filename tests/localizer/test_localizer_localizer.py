@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from localizer.belief import LocalizationState
+from localizer.cameras import CameraSpec
+from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap, Localizer, to_grey
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
+from mapdb.records import FingerprintTable, MapSnapshot, Place
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.world import Pose2D
@@ -126,3 +131,23 @@ def test_a_map_calibrated_before_the_spread_count_is_read_on_raw_inliers(buildin
         states[name] = belief.state
     assert states["legacy"] is not LocalizationState.LOST  # raw inliers, above the threshold
     assert states["spread"] is LocalizationState.LOST
+
+
+def one_and_two_place_map() -> LoadedMap:
+    """``attic`` with one place, ``cellar`` with two (random-texture fingerprints)."""
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (64, 256), dtype=np.uint8) for _ in range(3)]
+    fingerprints = [extract_with_camera(image, CameraSpec(), "sift") for image in images]
+    rooms = ["attic", "cellar", "cellar"]
+    table = FingerprintTable.stack("sift", [1, 2, 3], rooms, fingerprints)
+    places = tuple(Place(i, room) for i, room in zip([1, 2, 3], rooms, strict=True))
+    return LoadedMap.from_snapshot(MapSnapshot(Path("m"), table, places, ("attic", "cellar"), ()))
+
+
+@pytest.mark.parametrize(("top_room", "state"), [("cellar", "localized"), ("attic", "ambiguous")])
+def test_a_room_of_one_place_must_win_by_more_to_be_localized(top_room: str, state: str):
+    localizer = Localizer(one_and_two_place_map())
+    other = "attic" if top_room == "cellar" else "cellar"
+    belief = localizer.reset({top_room: 15.0, other: 1.0})  # 15 to 1: between 10 and 20
+    assert belief.state is LocalizationState(state)
+    assert localizer.map.places_per_room == {"attic": 1, "cellar": 2}

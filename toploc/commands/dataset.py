@@ -88,6 +88,7 @@ def dataset() -> None:
 )
 @click.option("--grey", is_flag=True, help="Write grey images instead of colour.")
 @click.option("--overwrite", is_flag=True, help="Replace the dataset in a non-empty OUT.")
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 def render(
     out: Path,
     world_name: str,
@@ -103,6 +104,7 @@ def render(
     camera_height_m: float | None,
     grey: bool,
     overwrite: bool,
+    progress: bool,
 ) -> None:
     """Render a panorama at every capture place of a preset world into the folder OUT."""
     from mapdb.dataset import read_manifest
@@ -118,14 +120,15 @@ def render(
             names = None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
             spacing = PHOTO_SPACING_M if spacing_m is None else spacing_m
             manifest = render_photo_dataset(
-                out, names, spacing, condition, seed, heading, camera, grey, overwrite
+                out, names, spacing, condition, seed, heading, camera, grey, overwrite, progress
             )
         else:
             from robot.dataset import render_dataset
 
             manifest = render_dataset(
-                out, world_name, spacing_m, condition, seed, heading, camera, grey, overwrite
-            )
+                out, world_name, spacing_m, condition, seed, heading, camera, grey, overwrite,
+                progress,
+            )  # fmt: skip
     except ValueError as error:
         raise click.ClickException(str(error)) from error
     rows = read_manifest(manifest.parent)
