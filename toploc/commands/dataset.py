@@ -117,7 +117,7 @@ def render(
         if world_name == PHOTOS:
             from robot.photo_dataset import PHOTO_SPACING_M, render_photo_dataset
 
-            names = None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
+            names = _room_list(rooms)
             spacing = PHOTO_SPACING_M if spacing_m is None else spacing_m
             manifest = render_photo_dataset(
                 out, names, spacing, condition, seed, heading, camera, grey, overwrite, progress
@@ -135,6 +135,11 @@ def render(
     click.echo(f"wrote {len(rows)} panoramas and {manifest}")
     for room, count in Counter(row.room for row in rows).items():
         click.echo(f"  {room}: {count} places")
+
+
+def _room_list(rooms: str | None) -> list[str] | None:
+    """``--rooms A,B,...`` as a list of names (None: all rooms)."""
+    return None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
 
 
 def _camera(
@@ -223,7 +228,7 @@ def perturb(
     from robot.conditions import get_condition
     from robot.perturb import Perturbation, perturb_dataset
 
-    names = None if rooms is None else [r.strip() for r in rooms.split(",") if r.strip()]
+    names = _room_list(rooms)
     perturbation = Perturbation(
         roll_deg=None if random_roll else roll_deg,
         width_px=width_px,
