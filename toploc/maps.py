@@ -11,12 +11,14 @@ first run) is completed on the next, since rendering and building are both resum
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
 from localizer.calibration import MAX_QUERIES, calibrate, motions_to_try
 from localizer.evidence import EvidenceParams
+from localizer.features import CAMERA_DEFAULTS, ExtractionParams, params_from_preset
 from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
@@ -103,13 +105,20 @@ def ensure_world_map(
     progress: bool = True,
 ) -> Path:
     """The map of the preset ``world`` (rendered with ``seed``, default condition), made if
-    missing; returns the database path ``<root>/<world>-<seed>/map.db``."""
+    missing or made by an older toploc (:func:`outdated_cache_map`, said on stderr); returns
+    the database path ``<root>/<world>-<seed>/map.db``."""
     folder = (root or cache_dir()) / f"{world}-{seed}"
     dataset, db_path = folder / "dataset", folder / "map.db"
     done_marker = folder / f"built-{detector}"
     if done_marker.exists() and db_path.exists():
-        _calibrate_once(db_path, detector, progress)
-        return db_path
+        outdated = outdated_cache_map(db_path, detector)
+        if outdated is None:
+            _calibrate_once(db_path, detector, progress)
+            return db_path
+        print(f"{db_path}: made by an older toploc ({outdated}); making it again", file=sys.stderr)
+        done_marker.unlink()
+        for suffix in ("", "-wal", "-shm"):
+            db_path.with_name(db_path.name + suffix).unlink(missing_ok=True)
     if not (dataset / MANIFEST_NAME).exists():
         render_dataset(dataset, world, seed=seed, overwrite=True, progress=progress)
     entries = read_manifest(dataset)
@@ -125,6 +134,30 @@ def ensure_world_map(
     _calibrate_once(db_path, detector, progress)
     done_marker.touch()
     return db_path
+
+
+def outdated_cache_map(db_path: Path, detector: str) -> str | None:
+    """Why a cached world map (toploc's own, :func:`ensure_world_map`) is out of date, or None:
+    its places were extracted otherwise than this version extracts them for their camera
+    (before the contrast equalisation, say: its queries would follow the old settings), or its
+    likelihood reads another count than this version's. A user's map is never remade (it
+    outlives the code, and queries follow it); this one is toploc's and is made again."""
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        stored = map_db.stored_params()
+        model = map_db.likelihood(detector)
+    if stored is None:
+        return "it has no places"
+    kind = str(stored.get("camera", "cylinder"))
+    current = params_from_preset(detector, camera=kind, **CAMERA_DEFAULTS.get(kind, {}))
+    if ExtractionParams.from_record(stored) != current:
+        return "its places were extracted with other settings"
+    if model is None:
+        return None  # calibrated on first use
+    try:
+        count = RatioLikelihood.from_json(model).count
+    except ValueError:
+        return "its likelihood is of an older kind"
+    return None if count == RatioLikelihood().count else "its likelihood reads another count"
 
 
 def _calibrate_once(db_path: Path, detector: str, progress: bool) -> None:

@@ -1,0 +1,76 @@
+"""toploc's own cached world maps (the demo's, `sim kidnap`'s) are made again when an older
+toploc made them; a user's map never is."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from localizer.cameras import CameraSpec
+from localizer.features import extract_with_camera
+from localizer.likelihood import RatioLikelihood
+from mapdb.database import MapDatabase
+from mapdb.records import NewPlace
+from toploc.maps import ensure_world_map, outdated_cache_map
+
+
+def panorama(seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (64, 256), dtype=np.uint8)
+
+
+def old_fingerprint(seed: int):
+    """A fingerprint as toploc stored it before the contrast equalisation."""
+    fingerprint = extract_with_camera(panorama(seed), CameraSpec(), "sift", clahe_clip_limit=0.0)
+    params = {k: v for k, v in fingerprint.params.items() if not k.startswith("clahe_")}
+    return replace(fingerprint, params=params)
+
+
+def map_with(db_path: Path, fingerprint) -> Path:
+    with MapDatabase.open(db_path) as map_db:
+        map_db.add_place(NewPlace("hall", "ab" * 32, "a.png"), [fingerprint])
+    return db_path
+
+
+def test_a_map_extracted_as_this_version_does_is_current(tmp_path: Path) -> None:
+    fresh = extract_with_camera(panorama(0), CameraSpec(), "sift")
+    assert outdated_cache_map(map_with(tmp_path / "m.db", fresh), "sift") is None
+
+
+def test_a_map_extracted_before_the_equalisation_is_outdated(tmp_path: Path) -> None:
+    db_path = map_with(tmp_path / "m.db", old_fingerprint(0))
+    assert outdated_cache_map(db_path, "sift") == "its places were extracted with other settings"
+
+
+def test_a_likelihood_on_raw_inliers_is_outdated(tmp_path: Path) -> None:
+    db_path = map_with(tmp_path / "m.db", extract_with_camera(panorama(0), CameraSpec(), "sift"))
+    legacy = RatioLikelihood(count="inliers").to_json()
+    with MapDatabase.open(db_path) as map_db:
+        map_db.set_likelihood("sift", legacy)
+    assert outdated_cache_map(db_path, "sift") == "its likelihood reads another count"
+
+
+def test_an_outdated_cached_world_map_is_made_again(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "square-0"
+    dataset = folder / "dataset"
+    (dataset / "images").mkdir(parents=True)
+    rows = ["image,room,x_m,y_m,heading_deg"]
+    for i, room in enumerate(("hall", "hall", "lab", "lab")):
+        cv2.imwrite(str(dataset / "images" / f"p{i}.png"), panorama(i))
+        rows.append(f"images/p{i}.png,{room},{i},0,0")
+    (dataset / "manifest.csv").write_text("\n".join(rows) + "\n")
+    map_with(folder / "map.db", old_fingerprint(9))
+    (folder / "built-sift").touch()
+
+    db_path = ensure_world_map("square", root=tmp_path, progress=False)
+    assert "made by an older toploc" in capsys.readouterr().err
+    assert outdated_cache_map(db_path, "sift") is None
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert len(map_db.places()) == 4  # the dataset's, not the old map's one place
+        likelihood = map_db.likelihood("sift")
+    assert likelihood is not None and likelihood["count"] == "spread"
