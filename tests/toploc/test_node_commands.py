@@ -34,6 +34,7 @@ class Node:
     """A ``python -m toploc node ...`` process; its output lines on a queue."""
 
     def __init__(self, *args: str) -> None:
+        self.args = args
         env = {
             **os.environ,
             "PYTHONPATH": str(REPO),
@@ -81,16 +82,22 @@ class Node:
 
 @contextmanager
 def nodes(*commands: tuple[str, ...]) -> Iterator[list[Node]]:
-    """Start each node in turn (each ready before the next), stop them all at the end."""
+    """Start each node in turn (each ready before the next), stop them all at the end; if the
+    block failed, print every node's output (pytest shows it with the failure)."""
     started: list[Node] = []
+    failed = True
     try:
         for command in commands:
             started.append(Node(*command))
             started[-1].wait_ready()
         yield started
+        failed = False
     finally:
         for node in reversed(started):
             node.stop()
+        for node in started if failed else ():
+            print(f"--- toploc node {node.args[0]} (exit {node.process.returncode}) ---")
+            print("\n".join(node.output))
 
 
 def diagnosis(belief: dict, running: list[Node]) -> str:
