@@ -213,16 +213,18 @@ def matching_overrides(record: Mapping[str, Any]) -> dict[str, Any]:
     (its ``params``) to be comparable with it: the contrast equalisation and the keypoint cap,
     which change which keypoints are found (:meth:`ExtractionParams.from_record`: a record from
     before the equalisation means none, and one without ``max_keypoints`` no cap), and the width
-    the place was read at, if it was shrunk (``toploc map build --read-width``; a record
-    without one leaves the query's camera default: a cylinder map can be queried with a
-    2048-wide sphere, read at 1024)."""
+    the place was read at when it is not its camera's default (``toploc map build
+    --read-width``): a map read at the defaults leaves every query at its own camera's default
+    (a 2048-wide sphere read at 1024 against a cylinder map, a wide cylinder at full width
+    against a sphere map, as before the option existed)."""
     stored = ExtractionParams.from_record(record)
     overrides: dict[str, Any] = {
         "clahe_clip_limit": stored.clahe_clip_limit,
         "clahe_band_deg": stored.clahe_band_deg,
         "max_keypoints": stored.max_keypoints,
     }
-    if stored.max_width_px is not None:
+    default_width = CAMERA_DEFAULTS.get(stored.camera, {}).get("max_width_px")
+    if stored.max_width_px != default_width:
         overrides["max_width_px"] = stored.max_width_px
     return overrides
 

@@ -440,10 +440,14 @@ class MapDatabase:
         return dict(rows)
 
     @_translated
-    def stored_params(self) -> dict[str, Any] | None:
-        """The extraction parameters recorded with the map's first fingerprint (None for a map
-        without places): what a new place or a query must share to be comparable."""
-        row = self.db.execute("SELECT params_json FROM fingerprints ORDER BY id LIMIT 1").fetchone()
+    def stored_params(self, detector: str | None = None) -> dict[str, Any] | None:
+        """The extraction parameters recorded with the map's first fingerprint (of ``detector``,
+        if given; None for a map without one): what a new place or a query must share to be
+        comparable."""
+        where, args = ("WHERE detector = ?", [detector]) if detector is not None else ("", [])
+        row = self.db.execute(
+            f"SELECT params_json FROM fingerprints {where} ORDER BY id LIMIT 1", args
+        ).fetchone()
         return None if row is None else dict(json.loads(row[0]))
 
     @_translated

@@ -187,7 +187,8 @@ def read_room_folders(dataset_dir: Path | str, allow_outside: bool = False) -> l
     ``house/kitchen/IMG_0001.JPG``.
 
     Raises :class:`ManifestError` naming the folder when it holds images directly (their room
-    is unknown), when no sub-folder holds an image, when a sub-folder's name is not a valid
+    is unknown), when it has an ``images`` sub-folder (the layout of a dataset whose manifest
+    is missing), when no sub-folder holds an image, when a sub-folder's name is not a valid
     room name, or when an image resolves outside the folder (unless ``allow_outside``).
     """
     folder = Path(dataset_dir)
@@ -199,6 +200,12 @@ def read_room_folders(dataset_dir: Path | str, allow_outside: bool = False) -> l
             f"{folder} has no {MANIFEST_NAME} and holds images directly ({', '.join(loose[:3])}"
             f"{', ...' if len(loose) > 3 else ''}): put each room's panoramas in a sub-folder "
             f"named after the room, or write a {MANIFEST_NAME}",
+            folder,
+        )
+    if (folder / "images").is_dir():  # a rendered or copied dataset whose manifest is gone
+        raise ManifestError(
+            f"{folder} has no {MANIFEST_NAME} but an images/ folder: is the manifest missing? "
+            f"(a room cannot be named 'images' in a folder of room sub-folders)",
             folder,
         )
     entries = []

@@ -86,16 +86,21 @@ def perturb_dataset(
     by the roll) and the source's ``edges.csv`` between the rooms copied; returns the
     manifest's path. Image ``i`` draws its roll and noise from ``seed`` and ``i``.
 
-    Raises ``ValueError`` for a room of ``rooms`` that ``source`` lacks, and the readers'
-    errors (:class:`mapdb.errors.ManifestError`, :class:`localizer.panorama_io.PanoramaError`)
-    naming the file.
+    Raises ``ValueError`` for a room of ``rooms`` that ``source`` lacks (or an empty
+    ``rooms``) and for an ``out_dir`` that holds images of ``source`` (it is cleared first),
+    and the readers' errors (:class:`mapdb.errors.ManifestError`,
+    :class:`localizer.panorama_io.PanoramaError`) naming the file.
     """
     entries = read_dataset(source)
     if rooms is not None:
         missing = sorted(set(rooms) - {e.room for e in entries})
-        if missing:
-            raise ValueError(f"{source} has no room {', '.join(missing)}")
+        if missing or not rooms:
+            raise ValueError(f"{source} has no room {', '.join(missing) or '(none given)'}")
         entries = [e for e in entries if e.room in rooms]
+    inside = [e.image for e in entries if e.path.resolve().is_relative_to(out_dir.resolve())]
+    if inside:  # --overwrite would delete them before they are read
+        raise ValueError(f"{out_dir} holds images of {source} ({inside[0]}): choose another OUT")
+    edges = read_edges(source)
     prepare_folder(out_dir, overwrite)
     suffix = ".png" if perturbation.jpeg_quality is None else ".jpg"
     params = [] if perturbation.jpeg_quality is None else [cv2.IMWRITE_JPEG_QUALITY,
@@ -114,7 +119,7 @@ def perturb_dataset(
         heading = rolled_heading_deg(entry.heading_deg, roll_px, width)
         rows.append(ManifestRow(name, entry.room, entry.x_m, entry.y_m, heading))
     kept = {row.room for row in rows}
-    edges = [(a, b) for a, b in read_edges(source) if a in kept and b in kept]
+    edges = [(a, b) for a, b in edges if a in kept and b in kept]
     if edges:
         write_edges(out_dir / EDGES_NAME, edges)
     return write_manifest(out_dir / MANIFEST_NAME, rows)

@@ -116,7 +116,7 @@ def ensure_world_map(
             _calibrate_once(db_path, detector, progress)
             return db_path
         print(f"{db_path}: made by an older toploc ({outdated}); making it again", file=sys.stderr)
-        done_marker.unlink()
+        done_marker.unlink(missing_ok=True)  # another process may be remaking it too
         for suffix in ("", "-wal", "-shm"):
             db_path.with_name(db_path.name + suffix).unlink(missing_ok=True)
     if not (dataset / MANIFEST_NAME).exists():
@@ -143,7 +143,7 @@ def outdated_cache_map(db_path: Path, detector: str) -> str | None:
     likelihood reads another count than this version's. A user's map is never remade (it
     outlives the code, and queries follow it); this one is toploc's and is made again."""
     with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
-        stored = map_db.stored_params()
+        stored = map_db.stored_params(detector)
         model = map_db.likelihood(detector)
     if stored is None:
         return "it has no places"

@@ -69,9 +69,9 @@ def test_a_photo_at_a_quarter_of_the_light_keeps_its_keypoints_only_when_equalis
 
 def test_a_record_without_the_contrast_fields_means_no_equalisation() -> None:
     new = extract_with_camera(photo(), CameraSpec(), "sift")
+    # read at the sphere's default width: no width is passed on
     assert matching_overrides(new.params) == {
-        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": 1000,
-        "max_width_px": 1024,  # the equirectangular default
+        "clahe_clip_limit": 2.0, "clahe_band_deg": 45.0, "max_keypoints": 1000
     }  # fmt: skip
     assert matching_overrides(unequalised_record(new).params)["clahe_clip_limit"] == 0.0
 
@@ -126,3 +126,9 @@ def test_a_cylinder_map_leaves_a_sphere_query_at_its_camera_s_width() -> None:
     assert "max_width_px" not in matching_overrides(cylinder.params)
     query = _localizer([cylinder]).extract(cv2.resize(photo(), (2048, 1024)))
     assert query.params["max_width_px"] == 1024
+
+
+def test_a_sphere_map_at_the_default_width_leaves_a_wide_cylinder_query_at_full_width() -> None:
+    sphere = extract_with_camera(photo(), CameraSpec(), "sift")  # read at up to 1024 px
+    query = _localizer([sphere]).extract(cv2.resize(photo()[64:192], (1536, 384)))
+    assert query.params.get("max_width_px") is None  # the cylinder's default: never shrunk

@@ -256,7 +256,7 @@ def test_a_map_read_at_a_chosen_width_keeps_it_and_refuses_another(tmp_path, db_
     write_image(photos / "lab" / "c.png", 3, size_px=(1200, 600))
     other = build(photos, db_path, "--workers", "0", "--read-width", "1024", "--no-calibrate")
     assert other.exit_code == 2
-    assert "--read-width 1024: the map's places were read shrunk to 1200 px" in other.output
+    assert "--read-width 1024: the map's places were read at up to 1200 px wide" in other.output
     follows = build(photos, db_path, "--workers", "0", "--no-calibrate")
     assert "added 1, skipped 2" in follows.stdout
     with sqlite3.connect(db_path) as conn:

@@ -37,6 +37,17 @@ def test_add_place_stores_pose_size_and_fingerprints(
     assert map_db.place_id_for_image(f"{7:064x}") == place_id
 
 
+def test_stored_params_are_the_first_fingerprint_s_of_a_detector(
+    map_db: MapDatabase, rng: np.random.Generator
+) -> None:
+    assert map_db.stored_params() is None  # no places yet
+    sift, mser = make_fingerprint(rng, "sift", 5), make_fingerprint(rng, "mser", 3)
+    map_db.add_place(new_place("lab", 7), [sift, mser])
+    assert map_db.stored_params()["detector"] == "sift"  # the first written
+    assert map_db.stored_params("mser")["detector"] == "mser"
+    assert map_db.stored_params("orb") is None
+
+
 def test_unknown_pose_is_stored_as_null(map_db: MapDatabase, rng: np.random.Generator) -> None:
     place = new_place("lab", 1)
     unknown = type(place)(room="lab", image_sha256=place.image_sha256, source="s")

@@ -107,6 +107,14 @@ def test_a_folder_without_manifest_or_room_images_says_what_a_dataset_is(tmp_pat
         read_dataset(folder)
 
 
+def test_a_dataset_whose_manifest_is_gone_is_not_read_as_a_room_named_images(
+    tmp_path: Path,
+) -> None:
+    folder = write_files(tmp_path / "ds", "images/pano_000.png")
+    with pytest.raises(ManifestError, match=r"is the manifest missing"):
+        read_dataset(folder)
+
+
 def test_a_room_folder_whose_name_is_no_room_name_is_named(tmp_path: Path) -> None:
     folder = write_files(tmp_path / "ds", "bad\troom/a.jpg")
     with pytest.raises(ManifestError, match=r"bad\\troom.*control character"):

@@ -137,3 +137,23 @@ def test_the_command_names_a_missing_room_and_a_corrupt_image(tmp_path: Path) ->
     corrupt = CliRunner().invoke(dataset, ["perturb", str(source), str(tmp_path / "o2"),
                                            "--no-progress"])  # fmt: skip
     assert corrupt.exit_code == 1 and "p1.png" in corrupt.output
+
+
+def test_a_copy_into_its_own_source_is_refused_before_anything_is_deleted(tmp_path: Path) -> None:
+    source = write_source(tmp_path / "src")
+    with pytest.raises(ValueError, match="holds images of"):
+        perturb_dataset(source, source, Perturbation(), overwrite=True, progress=False)
+    assert len(read_manifest(source)) == 3 and (source / "edges.csv").exists()
+
+
+def test_no_rooms_is_refused(tmp_path: Path) -> None:
+    source = write_source(tmp_path / "src")
+    with pytest.raises(ValueError, match="none given"):
+        perturb_dataset(source, tmp_path / "out", Perturbation(), rooms=[], progress=False)
+
+
+def test_a_fixed_and_a_random_roll_together_are_refused(tmp_path: Path) -> None:
+    source = write_source(tmp_path / "src")
+    args = [str(source), str(tmp_path / "out"), "--roll-deg", "90", "--random-roll"]
+    result = CliRunner().invoke(dataset, ["perturb", *args])
+    assert result.exit_code == 2 and "not both" in result.output

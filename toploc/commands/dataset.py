@@ -219,15 +219,18 @@ def perturb(
     overwrite: bool,
     progress: bool,
 ) -> None:
-    """Copy the panoramas of SOURCE (a manifest, or one sub-folder per room) into OUT, each
-    turned in yaw, resized and under a capture condition: views of the same places that a map
-    built from SOURCE did not store (e.g. from real 360° photos with one capture point each)."""
+    """Copy the panoramas of SOURCE (a manifest, or one sub-folder per room) into OUT as grey
+    images, each turned in yaw, resized and under a capture condition: views of the same places
+    that a map built from SOURCE did not store (e.g. from real 360° photos with one capture
+    point each)."""
     from localizer.panorama_io import PanoramaError
     from mapdb.dataset import read_manifest
     from mapdb.errors import ManifestError
     from robot.conditions import get_condition
     from robot.perturb import Perturbation, perturb_dataset
 
+    if random_roll and roll_deg != 0.0:
+        raise click.UsageError("give --roll-deg or --random-roll, not both")
     names = _room_list(rooms)
     perturbation = Perturbation(
         roll_deg=None if random_roll else roll_deg,

@@ -306,16 +306,20 @@ def _overrides(map_db: MapDatabase, read_width_px: int | None) -> dict[str, Any]
     """The extraction settings a new place takes (:func:`toploc.extraction.map_overrides`),
     with ``--read-width``: a new map takes it, a map whose places were read otherwise refuses
     it (one map reads all its places, and its queries, one way)."""
+    from localizer.features import ExtractionParams
+
     overrides = map_overrides(map_db)
+    stored = map_db.stored_params()
     if read_width_px is None:
         return overrides
-    if map_db.stored_params() is not None and overrides.get("max_width_px") != read_width_px:
-        stored = overrides.get("max_width_px")
-        how = f"shrunk to {stored} px" if stored else "at their full width"
-        raise click.UsageError(
-            f"--read-width {read_width_px}: the map's places were read {how}, and a map reads "
-            f"all its places one way; leave --read-width out to follow the map"
-        )
+    if stored is not None:
+        width = ExtractionParams.from_record(stored).max_width_px
+        if width != read_width_px:
+            how = f"at up to {width} px wide" if width else "at their full width"
+            raise click.UsageError(
+                f"--read-width {read_width_px}: the map's places were read {how}, and a map "
+                f"reads all its places one way; leave --read-width out to follow the map"
+            )
     return {**overrides, "max_width_px": read_width_px}
 
 
