@@ -35,12 +35,15 @@ import serial
 
 from homing.bearings import wrap_angle_rad
 from localizer.robot_protocol import MoveResult, Odometry
+from robot.p2os_models import factors_for_model, factors_from_sync
 from robot.p2os_protocol import (
     SYNC0,
     SYNC2,
+    ConversionFactors,
     FrameParser,
     SipType,
     StandardSip,
+    StandardSipRaw,
     close_frame,
     decode_standard_sip,
     dhead_frame,
@@ -84,10 +87,23 @@ class P2osSettings:
 class P2osBase:
     """The base of a Pioneer on serial port ``port`` (see the module docstring)."""
 
-    def __init__(self, port: str, baud: int = 9600, settings: P2osSettings | None = None) -> None:
+    def __init__(
+        self,
+        port: str,
+        baud: int = 9600,
+        settings: P2osSettings | None = None,
+        model: str | None = None,
+    ) -> None:
         self.port = port
         self.baud = baud
         self.settings = settings or P2osSettings()
+        self.model = model
+        """The Pioneer model whose units the SIPs are read in (e.g. ``p3dx``); None: the
+        subclass the SYNC2 reply names (:mod:`robot.p2os_models`)."""
+        self.factors: ConversionFactors = (
+            factors_for_model(model) if model is not None else ConversionFactors()
+        )
+        """The conversion factors in use (set from the SYNC2 reply when ``model`` is None)."""
         self.robot_strings: tuple[str, ...] = ()
         """Name, class and subclass from the SYNC2 reply."""
         self.parser = FrameParser()
@@ -155,6 +171,8 @@ class P2osBase:
         try:
             ser.reset_input_buffer()
             self.robot_strings = self._handshake(ser)
+            if self.model is None:
+                self.factors = factors_from_sync(self.robot_strings, self.port)
             ser.write(open_frame())
             ser.write(enable_frame(True))
         except (serial.SerialException, OSError) as error:
@@ -268,11 +286,11 @@ class P2osBase:
             for payload in self.parser.feed(data):
                 if payload[0] in (SipType.STOPPED, SipType.MOVING):
                     try:
-                        sip = sip_to_si(decode_standard_sip(payload))
+                        raw = decode_standard_sip(payload)
                     except ValueError:
                         self.bad_sips += 1
                         continue
-                    self._on_sip(sip)
+                    self._on_sip(raw, sip_to_si(raw, self.factors))
 
     def _pulse_loop(self, halt: threading.Event) -> None:
         while not halt.wait(self.settings.pulse_s):
@@ -281,9 +299,11 @@ class P2osBase:
             except P2osError:
                 return
 
-    def _on_sip(self, sip: StandardSip) -> None:
-        """Integrate the SIP's position into the odometry (REP-103, continuous)."""
-        xc, yc = round(sip.x_m * 1000.0), round(sip.y_m * 1000.0)  # 1 mm per count
+    def _on_sip(self, raw: StandardSipRaw, sip: StandardSip) -> None:
+        """Integrate the SIP's position into the odometry (REP-103, continuous); ``raw`` in the
+        model's counts, ``sip`` the same in SI."""
+        xc, yc = raw.x_counts, raw.y_counts
+        m_per_count = self.factors.mm_per_count / 1000.0
         with self._cond:
             if self._fw_prev is None:  # a new connection: anchor the firmware frame here
                 o = self._odom
@@ -294,8 +314,8 @@ class P2osBase:
                 px, py = self._fw_prev
                 fx, fy = self._fw_xy_m
                 self._fw_xy_m = (
-                    fx + position_delta_counts(px, xc) / 1000.0,
-                    fy + position_delta_counts(py, yc) / 1000.0,
+                    fx + position_delta_counts(px, xc) * m_per_count,
+                    fy + position_delta_counts(py, yc) * m_per_count,
                 )
             self._fw_prev = (xc, yc)
             ax, ay, ah = self._anchor
@@ -384,7 +404,9 @@ class P2osBase:
             with self._cond:
                 done = self._heading_total_rad - start
             turning = abs(sip.right_vel_m_s - sip.left_vel_m_s) > 0.005
-            if abs(turn_rad - done) < s.turn_tol_rad and not turning:
+            # the heading reached, not the path: a turn of +180 deg that the firmware took the
+            # other way round (-180 deg) has arrived too
+            if abs(float(wrap_angle_rad(turn_rad - done))) < s.turn_tol_rad and not turning:
                 return done
             if time.monotonic() > deadline:
                 self._send(stop_frame())

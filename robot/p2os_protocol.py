@@ -21,8 +21,9 @@ Matched against (reference only, nothing copied):
   p2os masks the position with ``0xEFFF`` and unwraps it modulo 4096; we keep the 15 low bits
   (``0x7FFF``, unwrapped modulo 32768) as the operations manual describes x and y.
 
-Units: firmware units in the ``*Raw`` records and the command builders (mm, mm/s, deg, deg/s,
-tenths of volts, 4096 angle units per revolution); SI in :class:`StandardSip` (m, rad, m/s, V).
+Units: firmware units in the command builders (mm, mm/s, deg, deg/s) and the model's units in the
+``*Raw`` SIP (:class:`ConversionFactors`; tenths of volts); SI in :class:`StandardSip` (m, rad,
+m/s, V).
 Frame: the robot's odometry frame as the firmware keeps it (x forward at power-on, y left, heading
 counter-clockwise), REP-103 like the rest of toploc.
 """
@@ -309,18 +310,20 @@ control, flags, compass, sonar count: the standard SIP up to its sonar readings 
 _SONAR = struct.Struct("<BH")
 POSITION_WRAP = 1 << 15
 """The firmware's x and y are the 15 low bits of its integrated encoder position."""
-ANGLE_UNITS_PER_REV = 4096
 
 
 @dataclass(frozen=True)
 class StandardSipRaw:
     """A standard SIP in firmware units, fields in the order the robot sends them.
 
-    ``x_counts``/``y_counts`` wrap at 2**15 (see :func:`position_delta_counts`); a count is 1 mm
-    on a Pioneer 3 (``DistConvFactor``). ``heading_units``: 4096 per revolution, counter-
-    clockwise. Velocities in mm/s (``VelConvFactor`` 1 on a Pioneer 3), battery in tenths of
-    volts. Bumper bits: bit 0 is the first bumper; ``flags`` bit 0 is "motors enabled".
-    Sonar readings are ``(sonar index, range in mm)`` pairs, only the sonars fired this cycle.
+    The units are the model's (:class:`ConversionFactors`, chosen per model by
+    :mod:`robot.p2os_models`). ``x_counts``/``y_counts`` wrap at 2**15 (see
+    :func:`position_delta_counts`); a count is 1 mm on a Pioneer 3 with the SH controller, 0.485
+    mm on a classic P3-DX (``DistConvFactor``). ``heading_units``: 4096 per revolution on a
+    Pioneer 2 or 3 (1024 on a Pioneer 1), counter-clockwise. Wheel velocities in velocity units
+    (1 mm/s on a Pioneer 3, ``VelConvFactor``), battery in tenths of volts. Bumper bits: bit 0 is
+    the first bumper; ``flags`` bit 0 is "motors enabled". Sonar readings are ``(sonar index,
+    range in range units)`` pairs, only the sonars fired this cycle.
     Bytes after the sonar readings (timer, analog, digital I/O...) vary with the firmware and are
     not decoded.
     """
@@ -329,8 +332,8 @@ class StandardSipRaw:
     x_counts: int
     y_counts: int
     heading_units: int
-    left_vel_mm_s: int
-    right_vel_mm_s: int
+    left_vel_units: int
+    right_vel_units: int
     battery_decivolts: int
     left_stall: bool
     right_stall: bool
@@ -365,8 +368,8 @@ def decode_standard_sip(payload: bytes) -> StandardSipRaw:
         x_counts=x & (POSITION_WRAP - 1),
         y_counts=y & (POSITION_WRAP - 1),
         heading_units=th,
-        left_vel_mm_s=lv,
-        right_vel_mm_s=rv,
+        left_vel_units=lv,
+        right_vel_units=rv,
         battery_decivolts=batt,
         left_stall=bool(lo & 1),
         right_stall=bool(hi & 1),
@@ -387,8 +390,8 @@ def encode_standard_sip(sip: StandardSipRaw) -> bytes:
         sip.x_counts,
         sip.y_counts,
         sip.heading_units,
-        sip.left_vel_mm_s,
-        sip.right_vel_mm_s,
+        sip.left_vel_units,
+        sip.right_vel_units,
         sip.battery_decivolts,
         (sip.rear_bumpers << 1) | sip.left_stall,
         (sip.front_bumpers << 1) | sip.right_stall,
@@ -408,12 +411,18 @@ def position_delta_counts(previous: int, current: int) -> int:
 
 @dataclass(frozen=True)
 class ConversionFactors:
-    """Firmware units to SI; the defaults are a Pioneer 3's (p2os/ARIA robot parameters)."""
+    """A SIP's firmware units to SI; the defaults are a Pioneer 3-SH's (p2os/ARIA robot
+    parameters; :data:`robot.p2os_models.MODEL_FACTORS` has every model's)."""
 
     mm_per_count: float = 1.0  # DistConvFactor
-    rad_per_angle_unit: float = 2.0 * math.pi / ANGLE_UNITS_PER_REV  # AngleConvFactor 0.001534
+    rad_per_angle_unit: float = 0.001534  # AngleConvFactor (2 pi / 4096, as ARIA rounds it)
     mm_s_per_vel_unit: float = 1.0  # VelConvFactor
     mm_per_range_unit: float = 1.0  # RangeConvFactor
+
+    @property
+    def angle_units_per_rev(self) -> int:
+        """Heading units in one revolution (4096 on a Pioneer 2 or 3, 1024 on a Pioneer 1)."""
+        return round(2.0 * math.pi / self.rad_per_angle_unit)
 
 
 @dataclass(frozen=True)
@@ -445,15 +454,19 @@ class StandardSip:
 
 
 def sip_to_si(raw: StandardSipRaw, factors: ConversionFactors | None = None) -> StandardSip:
-    """``raw`` converted to SI with ``factors`` (a Pioneer 3's by default)."""
+    """``raw`` converted to SI with ``factors`` (a Pioneer 3-SH's by default). The heading is
+    its units' share of a revolution (:attr:`ConversionFactors.angle_units_per_rev`), so the
+    factor's rounding does not drift it past +-pi."""
     f = factors or ConversionFactors()
     return StandardSip(
         moving=raw.moving,
         x_m=raw.x_counts * f.mm_per_count / 1000.0,
         y_m=raw.y_counts * f.mm_per_count / 1000.0,
-        heading_rad=float(wrap_angle_rad(raw.heading_units * f.rad_per_angle_unit)),
-        left_vel_m_s=raw.left_vel_mm_s * f.mm_s_per_vel_unit / 1000.0,
-        right_vel_m_s=raw.right_vel_mm_s * f.mm_s_per_vel_unit / 1000.0,
+        heading_rad=float(
+            wrap_angle_rad(2.0 * math.pi * raw.heading_units / f.angle_units_per_rev)
+        ),
+        left_vel_m_s=raw.left_vel_units * f.mm_s_per_vel_unit / 1000.0,
+        right_vel_m_s=raw.right_vel_units * f.mm_s_per_vel_unit / 1000.0,
         battery_v=raw.battery_decivolts / 10.0,
         left_stall=raw.left_stall,
         right_stall=raw.right_stall,

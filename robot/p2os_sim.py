@@ -2,7 +2,8 @@
 
 It opens a pty (``os.openpty``), so a client opens :attr:`P2osSimulator.port` (or the stable
 symlink ``link``) like a serial port. It answers the handshake (SYNC0 and SYNC1 echoed, SYNC2
-answered with the robot's name, class and subclass strings, as ARIA reads them), then OPEN,
+answered with the robot's name, class and subclass strings, as ARIA reads them; the subclass is
+``model``, and its SIPs are in that model's units), then OPEN,
 ENABLE, PULSE, CLOSE, VEL, RVEL, HEAD, DHEAD and STOP. A unicycle integrates the commands every
 ``cycle_s`` (wall seconds; ``time_scale`` simulated seconds per wall second) in a rendered world:
 the true pose is in the building frame, a disc of ``radius_m`` stops at walls and furniture
@@ -36,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from homing.bearings import wrap_angle_rad
+from robot.p2os_models import DEFAULT_MODEL, factors_for_model
 from robot.p2os_protocol import (
-    ANGLE_UNITS_PER_REV,
     POSITION_WRAP,
     SYNC0,
     SYNC1,
@@ -55,8 +56,8 @@ from robot.world import Pose2D, World
 
 FRONT_BUMPERS = 0b01110
 """The bumper bits a head-on contact presses (a Pioneer 3 has five segments front and rear)."""
-ROBOT_STRINGS = (b"toploc-sim", b"Pioneer", b"p3dx-sh")
-"""Name, class and subclass sent in the SYNC2 reply."""
+ROBOT_NAME = b"toploc-sim"
+"""The name sent in the SYNC2 reply (then the class ``Pioneer`` and the model's subclass)."""
 
 
 @dataclass
@@ -108,6 +109,7 @@ class P2osSimulator:
         link: Path | None = None,
         faults: SimFaults | None = None,
         seed: int = 0,
+        model: str = DEFAULT_MODEL,
     ) -> None:
         if not (cycle_s > 0 and time_scale > 0 and watchdog_s > 0):
             raise ValueError(
@@ -120,6 +122,9 @@ class P2osSimulator:
                 f"starting pose ({pose.x_m}, {pose.y_m}) m is not free in world {world.name!r}"
             )
         self.world = world
+        self.model = model.strip().lower()
+        """The subclass the SYNC2 reply names; SIPs are in its units (ARIA's factors)."""
+        self.factors = factors_for_model(self.model)
         self.cycle_s = cycle_s
         self.time_scale = time_scale
         self.watchdog_s = watchdog_s
@@ -320,7 +325,8 @@ class P2osSimulator:
             self._write(encode_frame(bytes([SYNC1])))
         elif n == SYNC2 and phase == "sync2":
             self.phase = "ready"
-            self._write(encode_frame(bytes([SYNC2]) + b"".join(s + b"\0" for s in ROBOT_STRINGS)))
+            strings = (ROBOT_NAME, b"Pioneer", self.model.encode("ascii"))
+            self._write(encode_frame(bytes([SYNC2]) + b"".join(s + b"\0" for s in strings)))
         elif n == Command.OPEN and phase == "ready":
             self.phase = "open"
             self._last_command_s = time.monotonic()
@@ -375,17 +381,18 @@ class P2osSimulator:
     def _sip(self) -> StandardSipRaw:
         with self._lock:
             s = self._state
+            f = self.factors
             v, w = s.measured_vel_m_s, s.measured_rvel_rad_s
-            left = round((v - w * self.axle_m / 2) * 1000.0)
-            right = round((v + w * self.axle_m / 2) * 1000.0)
-            units = round(s.odom_heading_rad / (2 * math.pi) * ANGLE_UNITS_PER_REV)
+            left = round((v - w * self.axle_m / 2) * 1000.0 / f.mm_s_per_vel_unit)
+            right = round((v + w * self.axle_m / 2) * 1000.0 / f.mm_s_per_vel_unit)
+            units = round(s.odom_heading_rad / (2 * math.pi) * f.angle_units_per_rev)
             return StandardSipRaw(
                 moving=bool(v or w),
-                x_counts=round(s.odom_x_m * 1000.0) % POSITION_WRAP,
-                y_counts=round(s.odom_y_m * 1000.0) % POSITION_WRAP,
-                heading_units=units % ANGLE_UNITS_PER_REV,
-                left_vel_mm_s=int(np.clip(left, -32768, 32767)),
-                right_vel_mm_s=int(np.clip(right, -32768, 32767)),
+                x_counts=round(s.odom_x_m * 1000.0 / f.mm_per_count) % POSITION_WRAP,
+                y_counts=round(s.odom_y_m * 1000.0 / f.mm_per_count) % POSITION_WRAP,
+                heading_units=units % f.angle_units_per_rev,
+                left_vel_units=int(np.clip(left, -32768, 32767)),
+                right_vel_units=int(np.clip(right, -32768, 32767)),
                 battery_decivolts=128,
                 left_stall=s.stalled,
                 right_stall=s.stalled,

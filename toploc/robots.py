@@ -4,7 +4,9 @@
 - ``p2os-sim``: a P2OS simulator in this process on a pty, driven through the real serial
   protocol (:class:`robot.p2os_base.P2osBase`), with a sim camera rendering at the simulated
   base's true pose: the whole loop over the real protocol;
-- ``p2os:PORT``: a real Pioneer base on serial port ``PORT``. It has no camera of its own: the
+- ``p2os:PORT[@MODEL]``: a real Pioneer base on serial port ``PORT``, its SIPs read in the units
+  of the model its SYNC2 reply names, or of ``MODEL`` (e.g. ``p3dx``; :mod:`robot.p2os_models`)
+  when given. It has no camera of its own: the
   service captures from ``--source`` (:mod:`robot.camera_sources`); with ``--source sim`` the
   camera is a sim camera rendering at the true pose a ``toploc sim p2os --bus`` on that port
   publishes (:func:`true_pose_camera`; simulation only).
@@ -14,11 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 from localizer.robot_protocol import Camera, Robot
 from mapdb.database import MapDatabase
 from robot.p2os_base import P2osBase
+from robot.p2os_models import factors_for_model
 from robot.p2os_robot import BaseWithCamera, NoCamera, SimCamera
 from robot.p2os_sim import P2osSimulator
 from robot.render import PanoramaCamera
@@ -26,15 +30,30 @@ from robot.worlds import make_world
 from toploc.maps import kidnapped_robot
 from toploc.nodes.sim_truth import TruePose
 
-ROBOT_SPECS = "sim | p2os-sim | p2os:PORT"
+ROBOT_SPECS = "sim | p2os-sim | p2os:PORT[@MODEL]"
 
 
-def parse_robot_spec(spec: str) -> tuple[str, str | None]:
-    """``(kind, port)`` of a ``--robot`` spec; ``ValueError`` naming it otherwise."""
+@dataclass(frozen=True)
+class RobotSpec:
+    """A parsed ``--robot`` spec: ``kind`` sim, p2os-sim or p2os; the serial ``port`` and the
+    Pioneer ``model`` (None: the one its SYNC2 reply names) of a p2os base."""
+
+    kind: str
+    port: str | None = None
+    model: str | None = None
+
+
+def parse_robot_spec(spec: str) -> RobotSpec:
+    """The :class:`RobotSpec` of a ``--robot`` spec; ``ValueError`` naming it otherwise (an
+    unknown ``@MODEL`` included)."""
     if spec in ("sim", "p2os-sim"):
-        return spec, None
+        return RobotSpec(spec)
     if spec.startswith("p2os:") and len(spec) > len("p2os:"):
-        return "p2os", spec[len("p2os:") :]
+        port, at, model = spec[len("p2os:") :].partition("@")
+        if port and not (at and not model):
+            if model:
+                factors_for_model(model)  # an unknown model is refused here, naming the known
+            return RobotSpec("p2os", port, model or None)
     raise ValueError(f"a robot is {ROBOT_SPECS}, got {spec!r}")
 
 
@@ -68,10 +87,11 @@ def open_robot(
     if spec is None:
         yield None, "the bus's robot node"
         return
-    kind, port = parse_robot_spec(spec)
+    parsed = parse_robot_spec(spec)
+    kind, port = parsed.kind, parsed.port
     with ExitStack() as stack:
         if kind == "p2os" and port is not None:
-            base = P2osBase(port)
+            base = P2osBase(port, model=parsed.model)
             base.connect()
             stack.callback(base.close)
             where = f"the Pioneer on {port} ({', '.join(base.robot_strings)})"
@@ -109,7 +129,7 @@ def open_served_robot(
     true_pose)``; a ``p2os:PORT`` base with ``source`` ``sim`` gets the :func:`true_pose_camera`
     (feed ``true_pose`` from the bus), any other base its own camera."""
     base_camera, true_pose = None, None
-    if spec is not None and parse_robot_spec(spec)[0] == "p2os" and source == "sim":
+    if spec is not None and parse_robot_spec(spec).kind == "p2os" and source == "sim":
         base_camera, true_pose = true_pose_camera(world, robot_id, db_path, seed)
     with open_robot(spec, world, room, seed, db_path, base_camera) as (robot, where):
         yield robot, where, true_pose

@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 import serial
 
+from homing.bearings import wrap_angle_rad
 from robot.p2os_base import P2osBase, P2osError, P2osSettings
+from robot.p2os_models import factors_for_model, factors_from_sync
 from robot.p2os_protocol import (
     Command,
     FrameParser,
@@ -244,3 +246,78 @@ def test_a_second_client_cannot_open_a_port_in_use(sim: P2osSimulator, base: P2o
     with pytest.raises(P2osError, match=f"cannot open serial port {sim.port}"):
         second.connect()
     assert [c.command for c in sim.received].count(Command.OPEN) == 1  # the first one's only
+
+
+@pytest.mark.parametrize("turn_deg", [180.0, -180.0, 179.9, -179.9, 0.0, 360.0, -360.0])
+def test_a_turn_ends_at_its_heading_whichever_way_the_base_turned(
+    sim: P2osSimulator, base: P2osBase, turn_deg: float
+) -> None:
+    """+180 and -180 deg are one heading: the firmware may take either way round (issue 23)."""
+    expected_rad = float(wrap_angle_rad(math.radians(turn_deg)))
+    result = base.move(math.radians(turn_deg), 0.0)
+    tolerance_rad = math.radians(2.5)
+    assert abs(wrap_angle_rad(result.turned_rad - expected_rad)) < tolerance_rad
+    assert abs(wrap_angle_rad(base.odometry().heading_rad - expected_rad)) < tolerance_rad
+    assert abs(wrap_angle_rad(sim.true_pose.heading_rad - expected_rad)) < tolerance_rad
+
+
+@pytest.mark.parametrize("start_deg", [17.0, -123.0])
+def test_a_half_turn_from_any_heading_ends_behind_the_robot(
+    sim: P2osSimulator, base: P2osBase, start_deg: float
+) -> None:
+    base.move(math.radians(start_deg), 0.0)
+    before_rad = base.odometry().heading_rad
+    for turn_deg in (180.0, -180.0):
+        result = base.move(math.radians(turn_deg), 0.0)
+        assert abs(abs(result.turned_rad) - math.pi) < math.radians(2.5)
+        after_rad = base.odometry().heading_rad
+        assert abs(wrap_angle_rad(after_rad - before_rad - math.pi)) < math.radians(2.5)
+        before_rad = after_rad
+
+
+def test_a_classic_p3dx_is_read_in_its_own_units(world: World) -> None:
+    """A P3-DX without the SH controller counts 0.485 mm (ARIA's p3dx.p): told to drive 0.3 m,
+    it drives 0.3 m, and its odometry says so."""
+    sim = simulator(world, model="p3dx")
+    try:
+        with P2osBase(sim.port, settings=FAST) as base:
+            assert base.robot_strings[2] == "p3dx"
+            assert base.factors == factors_for_model("p3dx")
+            result = base.move(0.0, 0.3)
+            assert result.moved_m == pytest.approx(0.3, abs=0.03)
+            assert base.odometry().x_m == pytest.approx(0.3, abs=0.03)
+        assert sim.true_pose.x_m == pytest.approx(START.x_m + 0.3, abs=0.03)
+    finally:
+        sim.close()
+
+
+def test_a_pioneer_1_turns_in_1024_heading_units(world: World) -> None:
+    sim = simulator(world, model="pion1m")
+    try:
+        with P2osBase(sim.port, settings=FAST) as base:
+            result = base.move(math.pi / 2, 0.2)
+            assert result.turned_rad == pytest.approx(math.pi / 2, abs=math.radians(2.5))
+            assert result.moved_m == pytest.approx(0.2, abs=0.03)
+        assert sim.true_pose.y_m == pytest.approx(START.y_m + 0.2, abs=0.03)
+    finally:
+        sim.close()
+
+
+def test_a_named_model_overrides_the_sync_reply(world: World) -> None:
+    """A base whose SYNC2 names the wrong subclass can be told its model (p2os:PORT@p3dx)."""
+    sim = simulator(world, model="p3dx")
+    try:
+        with P2osBase(sim.port, settings=FAST, model="p3dx-sh") as base:
+            base.move(0.0, 0.3)  # its 0.485 mm counts read as 1 mm: it stops short
+        assert sim.true_pose.x_m - START.x_m == pytest.approx(0.3 * 0.485, abs=0.03)
+    finally:
+        sim.close()
+
+
+def test_an_unknown_model_is_read_as_a_p3dx_sh_with_a_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    with caplog.at_level("WARNING"):
+        factors = factors_from_sync(("robot", "Pioneer", "p9zz"), "/dev/ttyUSB0")
+    assert factors == factors_for_model("p3dx-sh")
+    assert "/dev/ttyUSB0: unknown Pioneer model 'p9zz'" in caplog.text

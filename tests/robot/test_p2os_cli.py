@@ -13,11 +13,16 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from localizer.active import ActiveParams, localize_actively
+from localizer.belief import LocalizationState
+from localizer.localizer import LoadedMap, Localizer
+from localizer.visual_homing import HomingParams, HomingResult, drive_home
 from mapdb.database import MapDatabase
+from mapdb.loading import load_snapshot
 from mapdb.records import Fingerprint, NewPlace
 from robot.p2os_base import P2osBase, P2osSettings
 from toploc.cli import main
-from toploc.robots import open_robot, parse_robot_spec
+from toploc.robots import RobotSpec, open_robot, parse_robot_spec
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -32,12 +37,18 @@ def tiny_map(tmp_path: Path) -> Path:
 
 
 def test_robot_specs() -> None:
-    assert parse_robot_spec("sim") == ("sim", None)
-    assert parse_robot_spec("p2os-sim") == ("p2os-sim", None)
-    assert parse_robot_spec("p2os:/dev/ttyUSB0") == ("p2os", "/dev/ttyUSB0")
-    for bad in ("p2os:", "pioneer", ""):
+    assert parse_robot_spec("sim") == RobotSpec("sim")
+    assert parse_robot_spec("p2os-sim") == RobotSpec("p2os-sim")
+    assert parse_robot_spec("p2os:/dev/ttyUSB0") == RobotSpec("p2os", "/dev/ttyUSB0")
+    assert parse_robot_spec("p2os:/dev/ttyUSB0@P3DX") == RobotSpec("p2os", "/dev/ttyUSB0", "P3DX")
+    for bad in ("p2os:", "pioneer", "", "p2os:@p3dx", "p2os:/dev/ttyS0@"):
         with pytest.raises(ValueError, match=re.escape("a robot is sim | p2os-sim | p2os:PORT")):
             parse_robot_spec(bad)
+
+
+def test_an_unknown_pioneer_model_names_the_known_ones() -> None:
+    with pytest.raises(ValueError, match=r"unknown Pioneer model 'p9dx'; known: amigo, .*p3dx"):
+        parse_robot_spec("p2os:/dev/ttyUSB0@p9dx")
 
 
 def test_serve_with_a_missing_port_is_one_line(tiny_map: Path, tmp_path: Path) -> None:
@@ -85,3 +96,27 @@ def test_sim_p2os_command_prints_a_port_that_speaks_p2os(tmp_path: Path) -> None
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def test_an_active_localization_whose_drive_turns_half_round_ends_with_a_belief(
+    building_map: tuple[Path, Path],
+) -> None:
+    """Issue 23: a homing step straight behind the robot (a turn of exactly 180 deg) over the
+    real protocol ends, and the active localization with it, in a belief, not a P2osError."""
+    db_path = building_map[0]
+    localizer = Localizer(LoadedMap.from_snapshot(load_snapshot(db_path)))
+    with open_robot("p2os-sim", "building", "office_b", 4, db_path) as (robot, _where):
+        assert robot is not None
+        turns: list[float] = []
+
+        def home(place_id: int) -> HomingResult:
+            turns.append(robot.move(math.pi, 0.0).turned_rad)  # the goal lies behind
+            goal = localizer.map.fingerprint(place_id)
+            return drive_home(robot, goal, localizer.extract, HomingParams(max_steps=2))
+
+        params = ActiveParams(max_targets=1)
+        result = localize_actively(localizer, robot, "most-likely", params, home=home)
+    assert result.first.state is LocalizationState.AMBIGUOUS  # so it drove
+    assert len(result.visits) == len(turns) == 1
+    assert result.final.state in tuple(LocalizationState)
+    assert all(abs(abs(turned) - math.pi) < math.radians(2.5) for turned in turns)

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from robot.p2os_models import DEFAULT_MODEL, MODEL_FACTORS
 from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
@@ -60,6 +61,14 @@ def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
 @click.option("--fault-every", type=click.IntRange(min=1), default=10, show_default=True)
 @click.option("--time-scale", type=click.FloatRange(min=0.1, max=20), default=1.0)
 @click.option(
+    "--model",
+    type=click.Choice(sorted(MODEL_FACTORS), case_sensitive=False),
+    default=DEFAULT_MODEL,
+    show_default=True,
+    help="The Pioneer model the SYNC2 reply names; the SIPs are in its units (a classic p3dx "
+    "counts 0.485 mm).",
+)
+@click.option(
     "--bus",
     "on_bus",
     is_flag=True,
@@ -77,6 +86,7 @@ def p2os(
     faults: tuple[str, ...],
     fault_every: int,
     time_scale: float,
+    model: str,
     on_bus: bool,
     robot_id: str,
     endpoints: tuple[str, ...],
@@ -89,7 +99,12 @@ def p2os(
     except ValueError as error:
         raise click.ClickException(f"--room {room!r}: {error}") from error
     sim = P2osSimulator(
-        built, pose, time_scale=time_scale, link=link, faults=simulator_faults(faults, fault_every)
+        built,
+        pose,
+        time_scale=time_scale,
+        link=link,
+        faults=simulator_faults(faults, fault_every),
+        model=model,
     )
     with ExitStack() as stack:
         stop = stack.enter_context(stop_on_signals())  # left last: the simulator closes first
