@@ -37,6 +37,7 @@ import numpy as np
 from localizer.evidence import EvidenceParams, QueryEvidence, place_evidence
 from localizer.features import extract_preset
 from localizer.retrieval import PlaceIndex
+from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table
 from mapdb.records import Fingerprint, FingerprintTable, NewPlace
@@ -44,7 +45,7 @@ from mapdb.workers import spawn_process_pool
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D, capture_places
+from robot.world import capture_places
 from robot.worlds import make_world
 
 TARGET = ("building", 0, 1.0)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from localizer.cameras import CameraSpec
+from localizer.robot_protocol import Pose2D
 from localizer.visual_homing import (
     VARIANTS,
     HomingParams,
@@ -35,7 +36,7 @@ from localizer.visual_homing import (
 )
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
-from robot.world import Pose2D, World, capture_places
+from robot.world import World, capture_places
 from robot.worlds import make_world
 
 SUCCESS_M = 0.3

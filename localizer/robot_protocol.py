@@ -1,4 +1,5 @@
-"""What toploc needs from a robot: capture a panorama, turn and drive, report odometry.
+"""What toploc needs from a robot: capture a panorama, turn and drive, report odometry; and
+the one planar pose type (:class:`Pose2D`) that odometry, room frames and simulated worlds share.
 
 The simulated robot (``robot.sim_robot``) and a real base (Pioneer over pyserial, with a
 camera) both provide :class:`Robot`; the active localizer and the Zenoh robot node use only
@@ -26,12 +27,19 @@ class Capture:
 
 
 @dataclass(frozen=True)
-class Odometry:
-    """Dead-reckoned pose in the odometry frame (metres, radians, REP-103), drifting over time."""
+class Pose2D:
+    """A planar robot pose: position ``x_m``, ``y_m`` (metres) and heading ``heading_rad``
+    (radians, counter-clockwise from the frame's +x axis; REP-103).
+
+    The frame is the one the holder's name and docstring say, never a second type: the
+    odometry frame for :meth:`Robot.odometry` (dead-reckoned, drifting over time), a room's
+    frame for a place, the building frame of a simulated world (:mod:`robot.world`) for the
+    true pose of a simulated robot.
+    """
 
     x_m: float
     y_m: float
-    heading_rad: float
+    heading_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -64,8 +72,8 @@ class Robot(Protocol):
         straight ahead (negative: backwards)."""
         ...
 
-    def odometry(self) -> Odometry:
-        """The current dead-reckoned pose."""
+    def odometry(self) -> Pose2D:
+        """The current dead-reckoned pose, in the odometry frame."""
         ...
 
     def stop(self) -> None:

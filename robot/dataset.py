@@ -28,11 +28,12 @@ import numpy as np
 from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
+from localizer.robot_protocol import Pose2D
 from mapdb.dataset import EDGES_NAME, MANIFEST_COLUMNS, MANIFEST_NAME
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D, capture_places
+from robot.world import capture_places
 from robot.worlds import make_world
 
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import serial
 
 from homing.bearings import wrap_angle_rad
-from localizer.robot_protocol import MoveResult, Odometry
+from localizer.robot_protocol import MoveResult, Pose2D
 from robot.p2os_models import factors_for_model, factors_from_sync
 from robot.p2os_protocol import (
     SYNC0,
@@ -126,7 +126,7 @@ class P2osBase:
         self._fw_xy_m = (0.0, 0.0)  # firmware position since this connection, unwrapped
         self._anchor = (0.0, 0.0, 0.0)  # odometry pose at this connection's first SIP
         self._fw_heading0 = 0.0
-        self._odom = Odometry(0.0, 0.0, 0.0)
+        self._odom = Pose2D(0.0, 0.0, 0.0)
         self._heading_total_rad = 0.0  # unwrapped heading
 
     # -- connection ---------------------------------------------------------------------------
@@ -323,7 +323,7 @@ class P2osBase:
             fx, fy = self._fw_xy_m
             heading = float(wrap_angle_rad(sip.heading_rad + rot))
             self._heading_total_rad += float(wrap_angle_rad(heading - self._odom.heading_rad))
-            self._odom = Odometry(
+            self._odom = Pose2D(
                 ax + fx * math.cos(rot) - fy * math.sin(rot),
                 ay + fx * math.sin(rot) + fy * math.cos(rot),
                 heading,
@@ -351,7 +351,7 @@ class P2osBase:
 
     # -- the Robot protocol's base part -------------------------------------------------------
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         """The odometry pose from the latest SIP."""
         self.ensure_connected()
         with self._cond:

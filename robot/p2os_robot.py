@@ -17,11 +17,11 @@ from typing import Protocol
 
 import cv2
 
-from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry
+from localizer.robot_protocol import Camera, Capture, MoveResult, Pose2D
 from robot.conditions import DEFAULT_CONDITION, Condition
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D, World
+from robot.world import World
 
 
 class Base(Protocol):
@@ -29,7 +29,7 @@ class Base(Protocol):
 
     def move(self, turn_rad: float, forward_m: float) -> MoveResult: ...
 
-    def odometry(self) -> Odometry: ...
+    def odometry(self) -> Pose2D: ...
 
     def stop(self) -> None: ...
 
@@ -57,7 +57,7 @@ class BaseWithCamera:
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         return self.base.move(turn_rad, forward_m)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         return self.base.odometry()
 
     def stop(self) -> None:

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from homing.bearings import wrap_angle_rad
+from localizer.robot_protocol import Pose2D
 from robot.p2os_models import DEFAULT_MODEL, factors_for_model
 from robot.p2os_protocol import (
     POSITION_WRAP,
@@ -52,7 +53,7 @@ from robot.p2os_protocol import (
     parse_command,
 )
 from robot.sim_robot import Obstacles
-from robot.world import Pose2D, World
+from robot.world import World
 
 FRONT_BUMPERS = 0b01110
 """The bumper bits a head-on contact presses (a Pioneer 3 has five segments front and rear)."""

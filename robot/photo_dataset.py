@@ -19,13 +19,14 @@ import numpy as np
 from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
+from localizer.robot_protocol import Pose2D
 from mapdb.dataset import EDGES_NAME, MANIFEST_NAME
 from robot.conditions import get_condition
 from robot.dataset import ManifestRow, prepare_folder, write_edges, write_manifest
 from robot.photo_library import load_photo, photo_room, photo_room_names
 from robot.photo_room import CAPTURE_HEIGHT_M, PhotoRoom, render_photo_room
 from robot.render import PanoramaCamera
-from robot.world import Pose2D, grid_coordinates_m
+from robot.world import grid_coordinates_m
 
 PHOTO_SPACING_M = 1.5
 PHOTO_MARGIN_M = 0.6

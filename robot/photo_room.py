@@ -24,9 +24,9 @@ import cv2
 import numpy as np
 
 from homing.bearings import column_from_bearing
+from localizer.robot_protocol import Pose2D
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
 from robot.render import PanoramaCamera
-from robot.world import Pose2D
 
 CAPTURE_HEIGHT_M = 1.4
 

@@ -30,9 +30,9 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from localizer.robot_protocol import Pose2D
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
 from robot.scene import Scene
-from robot.world import Pose2D
 
 Projection = Literal["cylinder", "equirect"]
 PROJECTIONS: tuple[Projection, ...] = ("cylinder", "equirect")

@@ -27,11 +27,11 @@ import cv2
 import numpy as np
 
 from homing.bearings import wrap_angle_rad
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from robot.conditions import Condition, get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import WALL_SIDES, Pose2D, Room, World
+from robot.world import WALL_SIDES, Room, World
 from robot.worlds import make_world
 
 PATH_STEP_M = 0.01
@@ -228,7 +228,7 @@ class SimulatedRobot:
         self._rng = np.random.default_rng([seed, 11])
         heading_rad = float(wrap_angle_rad(pose.heading_rad))
         self._pose = Pose2D(float(pose.x_m), float(pose.y_m), heading_rad)
-        self._odom = Odometry(0.0, 0.0, 0.0)
+        self._odom = Pose2D(0.0, 0.0, 0.0)
         self._captures = 0
         self._clock_s = 0.0
         self.distance_driven_m = 0.0
@@ -318,7 +318,7 @@ class SimulatedRobot:
         self.distance_driven_m += abs(driven)
         reported = forward_m * (driven / real_forward) if real_forward != 0 else forward_m
         odom_heading = float(wrap_angle_rad(self._odom.heading_rad + turn_rad))
-        self._odom = Odometry(
+        self._odom = Pose2D(
             self._odom.x_m + reported * math.cos(odom_heading),
             self._odom.y_m + reported * math.sin(odom_heading),
             odom_heading,
@@ -326,7 +326,7 @@ class SimulatedRobot:
         self._clock_s += abs(real_turn) / TURN_SPEED_RAD_S + abs(driven) / LINEAR_SPEED_M_S
         return MoveResult(turned_rad=turn_rad, moved_m=reported, bumped=bumped)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         """Dead-reckoned pose in the odometry frame (the commanded motion integrated)."""
         return self._odom
 

@@ -8,6 +8,9 @@ Frames (REP-103, metres, z up, floor at z = 0):
   and capture places are given in their room's frame; datasets record positions in it. Headings
   are therefore the same in a room frame and in the building frame.
 
+A pose in either frame is a :class:`localizer.robot_protocol.Pose2D`; its name says which
+(``pose`` of a room-frame place, ``true_pose`` of a simulated robot in the building frame).
+
 Rooms are axis-aligned boxes with zero-thickness walls; two rooms may share a wall, and a door is
 an opening in a shared wall. Wall sides are named by the outward axis direction: the ``"+x"`` wall
 is at the room's largest x.
@@ -20,18 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from localizer.robot_protocol import Pose2D
 from robot.textures import check_texture_name
 
 WALL_SIDES: tuple[str, str, str, str] = ("-x", "+x", "-y", "+y")
-
-
-@dataclass(frozen=True)
-class Pose2D:
-    """A robot pose: position in metres and heading in radians (CCW from +x) in some frame."""
-
-    x_m: float
-    y_m: float
-    heading_rad: float = 0.0
 
 
 @dataclass(frozen=True)

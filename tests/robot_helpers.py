@@ -1,7 +1,7 @@
 """A robot for the tests that passes every call to a real one, so a test overrides only what it
 gates or slows (a capture that waits for the test, a camera that takes its time)."""
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 
 
 class RobotWrapper:
@@ -16,7 +16,7 @@ class RobotWrapper:
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         return self.robot.move(turn_rad, forward_m)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         return self.robot.odometry()
 
     def stop(self) -> None:

@@ -34,7 +34,7 @@ from typing import Any
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
-from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import HomingResult
 
 RESET_WAIT_S = 1.0
@@ -81,7 +81,7 @@ class StoppableRobot:
         self._check()
         return self.robot.move(turn_rad, forward_m)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         return self.robot.odometry()
 
     def stop(self) -> None:

@@ -18,7 +18,7 @@ from bus_helpers import free_endpoint, wait_for
 from click.testing import CliRunner
 
 from localizer.belief import LocalizationState, RoomBelief
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
 from toploc import bus
@@ -53,8 +53,8 @@ class FakeRobot:
         self.moves.append((turn_rad, forward_m))
         return MoveResult(turn_rad, forward_m, bumped=False)
 
-    def odometry(self) -> Odometry:
-        return Odometry(0.0, 0.0, 0.0)
+    def odometry(self) -> Pose2D:
+        return Pose2D(0.0, 0.0, 0.0)
 
     def stop(self) -> None:
         """Moves are instantaneous here: nothing to stop."""

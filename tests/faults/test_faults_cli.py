@@ -12,10 +12,9 @@ from bus_helpers import free_port, wait_for
 from click.testing import CliRunner
 from robot_helpers import RobotWrapper
 
-from localizer.robot_protocol import Capture
+from localizer.robot_protocol import Capture, Pose2D
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc import bus
 from toploc.cli import main

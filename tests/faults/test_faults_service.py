@@ -16,13 +16,12 @@ from robot_helpers import RobotWrapper
 
 from localizer.belief import BeliefFilter
 from localizer.localizer import LoadedMap, Localizer
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
 from mapdb.records import Fingerprint, NewPlace
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc import bus
 from toploc.limits import Limits, RateLimit, load_limits
@@ -49,8 +48,8 @@ class SlowRobot:
         self.stopped.wait(10.0)
         return MoveResult(turn_rad, 0.0, False)
 
-    def odometry(self) -> Odometry:
-        return Odometry(0.0, 0.0, 0.0)
+    def odometry(self) -> Pose2D:
+        return Pose2D(0.0, 0.0, 0.0)
 
     def stop(self) -> None:
         self.stopped.set()

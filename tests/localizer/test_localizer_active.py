@@ -8,7 +8,7 @@ import pytest
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -50,8 +50,8 @@ class BlindRobot:
         self.moves += 1
         return MoveResult(turn_rad, forward_m, False)
 
-    def odometry(self) -> Odometry:
-        return Odometry(0.0, 0.0, 0.0)
+    def odometry(self) -> Pose2D:
+        return Pose2D(0.0, 0.0, 0.0)
 
     def stop(self) -> None:
         """Moves are instantaneous here: nothing to stop."""

@@ -168,9 +168,9 @@ def test_an_equirectangular_panorama_localizes_against_a_cylinder_map(building_m
     import cv2
     import numpy as np
 
+    from localizer.robot_protocol import Pose2D
     from robot.render import PanoramaCamera, render_panorama
     from robot.scene import build_scene
-    from robot.world import Pose2D
     from robot.worlds import make_world
 
     world = make_world("building")

@@ -12,6 +12,7 @@ from homing.bearings import wrap_angle_rad
 from localizer.evidence import EvidenceParams, PlaceEvidence, QueryEvidence, place_evidence
 from localizer.features import extract_preset
 from localizer.rays import rays_from_fingerprint
+from localizer.robot_protocol import Pose2D
 from localizer.verification import verify
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table
@@ -19,7 +20,6 @@ from mapdb.records import Fingerprint, FingerprintTable, NewPlace
 from robot.conditions import get_condition
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D
 from robot.worlds import make_world
 
 CAMERA = PanoramaCamera(width_px=1024, height_px=192)

@@ -14,12 +14,12 @@ from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap, Localizer, to_grey
+from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
 from mapdb.records import FingerprintTable, MapSnapshot, Place
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 
 CAMERA = PanoramaCamera(512, 96)

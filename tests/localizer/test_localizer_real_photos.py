@@ -21,11 +21,11 @@ from localizer.calibration import calibrate
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
 from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.robot_protocol import Pose2D
 from mapdb.records import FingerprintTable, MapSnapshot, Place
 from robot.photo_library import load_photo, photo_room
 from robot.photo_room import render_photo_room
 from robot.render import PanoramaCamera
-from robot.world import Pose2D
 
 MAP_ROOMS = (
     "brown_photostudio_01",

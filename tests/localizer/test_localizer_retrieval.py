@@ -11,13 +11,13 @@ import pytest
 from localizer.evidence import EvidenceParams, place_evidence
 from localizer.features import extract_preset
 from localizer.retrieval import IndexParams, PlaceIndex
+from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table
 from mapdb.records import Fingerprint, FingerprintTable, NewPlace
 from robot.conditions import get_condition
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D
 from robot.worlds import make_world
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from homing.alv import HomingError, alv_from_bearings
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from localizer.verification import Verification
 from localizer.visual_homing import (
     HomingParams,
@@ -23,7 +23,6 @@ from localizer.visual_homing import (
 from mapdb.records import Fingerprint
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 
 WIDTH_PX = 1024
@@ -183,8 +182,8 @@ class PointRobot:
         )
         return MoveResult(turn_rad, s, bumped)
 
-    def odometry(self) -> Odometry:
-        return Odometry(self.pose.x_m, self.pose.y_m, self.pose.heading_rad)
+    def odometry(self) -> Pose2D:
+        return Pose2D(self.pose.x_m, self.pose.y_m, self.pose.heading_rad)
 
     def stop(self) -> None:
         """Moves are instantaneous here: nothing to stop."""

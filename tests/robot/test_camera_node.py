@@ -14,7 +14,7 @@ import zenoh
 from bus_helpers import ROBOT_ID, Bus, wait_for
 from click.testing import CliRunner
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from robot.camera_sources import open_source
 from toploc import bus
 from toploc.cli import main
@@ -30,8 +30,8 @@ class Base:
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         return MoveResult(turn_rad, forward_m, False)
 
-    def odometry(self) -> Odometry:
-        return Odometry(0.0, 0.0, math.radians(30.0))
+    def odometry(self) -> Pose2D:
+        return Pose2D(0.0, 0.0, math.radians(30.0))
 
     def stop(self) -> None:
         """Nothing moves."""

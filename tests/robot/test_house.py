@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from localizer.robot_protocol import Pose2D
 from mapdb.dataset import read_edges, read_manifest
 from robot.dataset import render_dataset
 from robot.procedural_textures import PROCEDURAL_TEXTURES, procedural_texture
 from robot.render import PanoramaCamera, cast_rays, render_panorama
 from robot.scene import build_scene
-from robot.world import Box, Material, Pose2D, Room, World, capture_places
+from robot.world import Box, Material, Room, World, capture_places
 from robot.worlds import WORLD_NAMES, make_world
 
 ROOMS = ("hall", "bedroom_a", "bathroom_a", "bedroom_b", "bathroom_b", "living", "kitchen", "study")

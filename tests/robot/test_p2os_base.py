@@ -15,6 +15,7 @@ import pytest
 import serial
 
 from homing.bearings import wrap_angle_rad
+from localizer.robot_protocol import Pose2D
 from robot.p2os_base import P2osBase, P2osError, P2osSettings
 from robot.p2os_models import factors_for_model, factors_from_sync
 from robot.p2os_protocol import (
@@ -29,7 +30,7 @@ from robot.p2os_protocol import (
 from robot.p2os_robot import BaseWithCamera, SimCamera
 from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.render import PanoramaCamera, render_panorama
-from robot.world import Pose2D, World
+from robot.world import World
 from robot.worlds import make_world
 
 START = Pose2D(6.0, 3.9, 0.0)  # office_b of `building`: x 4-8 m, y 2.2-5.6 m

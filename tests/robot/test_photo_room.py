@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from localizer.robot_protocol import Pose2D
 from mapdb.dataset import read_edges, read_manifest
 from robot.photo_dataset import photo_places, render_photo_dataset
 from robot.photo_library import load_photo, photo_room, photo_room_names
 from robot.photo_room import PhotoRoom, box_exit_m, photo_pixel_of, render_photo_room
 from robot.render import PanoramaCamera
-from robot.world import Pose2D
 from toploc.commands.dataset import dataset
 
 EQUIRECT = PanoramaCamera(256, 128, height_m=1.4, projection="equirect")

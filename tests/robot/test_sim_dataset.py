@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from localizer.robot_protocol import Pose2D
 from mapdb.dataset import MANIFEST_COLUMNS, read_manifest
 from robot.conditions import get_condition
 from robot.dataset import render_dataset
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
-from robot.world import Pose2D, capture_places
+from robot.world import capture_places
 from robot.worlds import make_world
 from toploc.commands.dataset import dataset
 

@@ -10,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from homing.bearings import bearing_rad_from_column, column_from_bearing
+from localizer.robot_protocol import Pose2D
 from robot.render import PanoramaCamera, cast_rays, render_panorama
 from robot.scene import Scene, build_scene
-from robot.world import Box, Door, Material, Pose2D, Room, World, capture_places
+from robot.world import Box, Door, Material, Room, World, capture_places
 from robot.worlds import make_world
 
 GREY = Material("grey")

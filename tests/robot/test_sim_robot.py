@@ -9,10 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Pose2D, Robot
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, Obstacles, SimulatedRobot, random_free_pose
-from robot.world import Pose2D
 from robot.worlds import make_world
 
 SMALL = PanoramaCamera(128, 24)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from localizer.robot_protocol import Pose2D
 from robot.conditions import CONDITIONS, add_objects, get_condition, world_under
 from robot.render import PanoramaCamera, cast_rays, render_panorama
 from robot.scene import build_scene
-from robot.world import Material, Pose2D, capture_places, shared_wall
+from robot.world import Material, capture_places, shared_wall
 from robot.worlds import WORLD_NAMES, make_world
 
 SMALL = PanoramaCamera(256, 64)

@@ -12,7 +12,7 @@ from bus_helpers import ROBOT_ID, Bus, alive_nodes, free_port, wait_for
 from click.testing import CliRunner
 
 from localizer.belief import LocalizationState, RoomBelief
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
 from toploc import bus
@@ -45,8 +45,8 @@ class FakeRobot:
         self.y_m += moved_m * math.sin(self.heading_rad)
         return MoveResult(turn_rad, moved_m, bumped=moved_m < forward_m)
 
-    def odometry(self) -> Odometry:
-        return Odometry(self.x_m, self.y_m, self.heading_rad)
+    def odometry(self) -> Pose2D:
+        return Pose2D(self.x_m, self.y_m, self.heading_rad)
 
     def stop(self) -> None:
         """Moves are instantaneous here: nothing to stop."""
@@ -95,7 +95,7 @@ def test_a_grey_panorama_stays_grey(zbus):
 
 def test_move_round_trip_and_odometry(robot_bus):
     _, fake, remote = robot_bus
-    assert remote.odometry() == pytest.approx(Odometry(0.0, 0.0, 0.3))  # queried: no move yet
+    assert remote.odometry() == pytest.approx(Pose2D(0.0, 0.0, 0.3))  # queried: no move yet
     result = remote.move(math.pi / 2, 0.5)
     assert fake.moves == [pytest.approx((math.pi / 2, 0.5))]
     assert result.turned_rad == pytest.approx(math.pi / 2)

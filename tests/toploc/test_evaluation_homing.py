@@ -205,10 +205,10 @@ def test_pose_translation_points_home_on_renders(projection: str) -> None:
     from localizer.features import extract_with_camera
     from localizer.matching import match_descriptors
     from localizer.rays import rays_from_fingerprint
+    from localizer.robot_protocol import Pose2D
     from localizer.verification import home_direction_rad, verify
     from robot.render import render_panorama
     from robot.scene import build_scene
-    from robot.world import Pose2D
     from robot.worlds import make_world
 
     world = make_world("square")

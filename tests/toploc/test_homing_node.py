@@ -14,10 +14,9 @@ from pathlib import Path
 import pytest
 from bus_helpers import free_endpoint, wait_for
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc import bus
 from toploc.bus import BusConfig, open_session
@@ -53,7 +52,7 @@ class SlowRobot:
         self.stopped.wait(self.move_s)
         return self.robot.move(turn_rad, forward_m)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         return self.robot.odometry()
 
     def stop(self) -> None:

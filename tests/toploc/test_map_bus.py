@@ -14,11 +14,11 @@ from pathlib import Path
 import pytest
 from bus_helpers import free_endpoint, wait_for
 
+from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.errors import ReadOnlyDatabaseError
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc import bus
 from toploc.bus import BusConfig, open_session

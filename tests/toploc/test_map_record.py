@@ -13,10 +13,10 @@ import pytest
 from bus_helpers import free_port, wait_for
 from click.testing import CliRunner
 
+from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
 from toploc.cli import main

@@ -203,9 +203,9 @@ class _Base:
         return MoveResult(turn_rad, forward_m, False)
 
     def odometry(self):
-        from localizer.robot_protocol import Odometry
+        from localizer.robot_protocol import Pose2D
 
-        return Odometry(0.0, 0.0, np.radians(30.0))
+        return Pose2D(0.0, 0.0, np.radians(30.0))
 
     def stop(self) -> None:
         """Nothing moves."""

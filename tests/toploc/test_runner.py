@@ -13,10 +13,10 @@ from click.testing import CliRunner
 from robot_helpers import RobotWrapper
 
 from localizer.localizer import LoadedMap, Localizer
+from localizer.robot_protocol import Pose2D
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
 from toploc.cli import main

@@ -11,9 +11,9 @@ import pytest
 from bus_helpers import free_port, wait_for
 
 from localizer.belief import RoomBelief
+from localizer.robot_protocol import Pose2D
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
-from robot.world import Pose2D
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
 from toploc.nodes.localizer import LocalizerClient, check_belief, mark_stale

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from localizer.robot_protocol import Odometry
+from localizer.robot_protocol import Pose2D
 from mapdb.records import check_name
 from toploc import bus
 from toploc.bus_config import client_bus_config
@@ -56,7 +56,7 @@ class Recorder:
         self.pose, self.fixed = pose, fixed
         self.count = 0
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         """The robot's odometry now: a ``base/odom`` query (a base driven by hand may publish
         none while it moves)."""
         from toploc.nodes.robot import ODOM_FIELDS, odometry_from_fields

@@ -55,7 +55,7 @@ from typing import Any, TypeVar
 import zenoh
 
 from localizer.active import CANCELLED
-from localizer.robot_protocol import Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import HomingParams, HomingProgress, HomingResult, drive_home
 from mapdb.records import Fingerprint
 from toploc import bus
@@ -140,7 +140,7 @@ class _DriveRobot:
         self.drive.distance_m += abs(moved.moved_m)
         return moved
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         return self.robot.odometry()
 
     def stop(self) -> None:

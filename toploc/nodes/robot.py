@@ -40,7 +40,7 @@ from localizer.panorama_io import (
     PanoramaError,
     check_image_header,
 )
-from localizer.robot_protocol import Camera, Capture, MoveResult, Odometry, Robot
+from localizer.robot_protocol import Camera, Capture, MoveResult, Pose2D, Robot
 from toploc import bus
 from toploc.limits import Limits
 from toploc.nodes.camera import CameraNode
@@ -68,7 +68,7 @@ CAPTURE_FIELDS: dict[str, bus.FieldType] = {
 }
 
 
-def odometry_fields(odometry: Odometry, stamp_s: float) -> dict[str, float]:
+def odometry_fields(odometry: Pose2D, stamp_s: float) -> dict[str, float]:
     """The ``base/odom`` fields of ``odometry`` (heading in degrees, stamp in seconds)."""
     return {
         "x_m": odometry.x_m,
@@ -78,9 +78,9 @@ def odometry_fields(odometry: Odometry, stamp_s: float) -> dict[str, float]:
     }
 
 
-def odometry_from_fields(message: dict[str, Any]) -> Odometry:
+def odometry_from_fields(message: dict[str, Any]) -> Pose2D:
     """Inverse of :func:`odometry_fields` (on a checked message)."""
-    return Odometry(message["x_m"], message["y_m"], math.radians(message["heading_deg"]))
+    return Pose2D(message["x_m"], message["y_m"], math.radians(message["heading_deg"]))
 
 
 def decode_png(key_expr: str, data: bytes, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
@@ -175,7 +175,7 @@ class RobotNode(Node):
 
     def _move(
         self, turn_deg: float, forward_m: float, stops_seen: int
-    ) -> tuple[MoveResult, Odometry]:
+    ) -> tuple[MoveResult, Pose2D]:
         with self._lock:  # a capture may hold it for seconds: a stop meanwhile cancels the move
             if self._stops != stops_seen:
                 raise MoveStoppedError("base/stop came before the move started: not moved")
@@ -248,14 +248,14 @@ class RemoteRobot(Client):
         self.max_image_pixels = max_image_pixels
         self.last_capture_meta: dict[str, Any] | None = None
         self._odom_lock = threading.Lock()
-        self._last_odom: tuple[float, Odometry] | None = None  # (stamp_s, odometry)
+        self._last_odom: tuple[float, Pose2D] | None = None  # (stamp_s, odometry)
         self._subscribe(  # odometry() falls back to a query without one
             bus.BASE_ODOM,
             lambda key_expr, data: bus.decode(key_expr, data, ODOM_FIELDS),
             self._remember,
         )
 
-    def _remember(self, odom: dict[str, Any]) -> Odometry:
+    def _remember(self, odom: dict[str, Any]) -> Pose2D:
         """Keep the newest odometry by stamp (publications arrive on another thread)."""
         odometry = odometry_from_fields(odom)
         with self._odom_lock:
@@ -304,7 +304,7 @@ class RemoteRobot(Client):
         key_expr = bus.key(self.robot_id, bus.BASE_STOP)
         bus.request(self.session, key_expr, bus.encode("stop", {}), self.timeout_s)
 
-    def odometry(self) -> Odometry:
+    def odometry(self) -> Pose2D:
         """The newest odometry seen (``base/odom`` publications and move replies), or a
         ``base/odom`` query if none arrived yet."""
         with self._odom_lock:

@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from localizer.robot_protocol import Pose2D
 from robot.p2os_sim import P2osSimulator
 from robot.sim_robot import random_free_pose
-from robot.world import Pose2D
 from toploc import bus
 
 PERIOD_S = 0.1
