@@ -1,4 +1,5 @@
-"""Reading a panorama dataset folder: its ``manifest.csv`` and the SHA-256 of its images.
+"""A panorama dataset folder: its ``manifest.csv`` and ``edges.csv`` read and written, one
+:class:`ManifestEntry` per row either way, and the SHA-256 of its images.
 
 The manifest has the header ``image,room,x_m,y_m,heading_deg`` (extra columns are ignored);
 ``image`` is relative to the folder; ``x_m``, ``y_m`` (metres) and ``heading_deg`` (degrees, CCW)
@@ -16,12 +17,13 @@ import io
 import math
 import os
 import stat
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
 from mapdb.errors import ManifestError
-from mapdb.records import check_name
+from mapdb.records import check_finite, check_name
 
 MANIFEST_NAME = "manifest.csv"
 MANIFEST_COLUMNS = ("image", "room", "x_m", "y_m", "heading_deg")
@@ -31,7 +33,17 @@ EDGES_COLUMNS = ("room_a", "room_b")
 
 @dataclass(frozen=True)
 class ManifestEntry:
-    """One row of a manifest: an image file, its room and its (optional) pose in that room."""
+    """One row of a manifest, read (:func:`read_manifest`) or to be written
+    (:func:`write_manifest`): an image, its room and its (optional) pose in that room.
+
+    ``image`` is the manifest's text, relative to the dataset folder; ``path`` the file it names
+    (``folder / image``). ``x_m``, ``y_m`` (metres) and ``heading_deg`` (degrees, CCW) are in the
+    frame of the room, ``None`` when unknown (``x_m`` and ``y_m`` together). ``line`` is the
+    row's line in the manifest it was read from, 0 for an entry not read from one (an image
+    given directly, a row about to be written). Raises ``ValueError`` for a room name no map
+    can hold, a NaN or infinite coordinate, or only one of ``x_m`` and ``y_m``: a manifest
+    written from entries is one :func:`read_manifest` reads back.
+    """
 
     image: str
     path: Path
@@ -39,7 +51,20 @@ class ManifestEntry:
     x_m: float | None
     y_m: float | None
     heading_deg: float | None
-    line: int
+    line: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.image.strip():
+            raise ValueError(f"manifest entry of room {self.room!r}: image must not be empty")
+        check_name(self.room)
+        check_finite(self.x_m, "x_m")
+        check_finite(self.y_m, "y_m")
+        check_finite(self.heading_deg, "heading_deg")
+        if (self.x_m is None) != (self.y_m is None):
+            raise ValueError(
+                f"manifest entry {self.image!r}: give both x_m and y_m or neither, "
+                f"got {self.x_m} and {self.y_m}"
+            )
 
 
 def _optional_float(text: str | None, column: str, line: int, manifest: Path) -> float | None:
@@ -160,6 +185,35 @@ def read_manifest(dataset_dir: Path | str, allow_outside: bool = False) -> list[
         return [_entry(row, reader.line_num, folder, manifest, allow_outside) for row in reader]
     except csv.Error as error:
         raise ManifestError(f"{manifest} line {reader.line_num}: {error}", manifest) from None
+
+
+def write_manifest(dataset_dir: Path | str, entries: Iterable[ManifestEntry]) -> Path:
+    """Write ``dataset_dir/manifest.csv`` (UTF-8, the header ``image,room,x_m,y_m,heading_deg``)
+    with one row per entry, in order: its ``image`` and room, and empty cells for an unknown
+    position or heading (numbers written exactly, as ``repr`` of the float). ``path`` and
+    ``line`` are not written. Returns the manifest's path; ``OSError`` if it cannot be written.
+    """
+    manifest = Path(dataset_dir) / MANIFEST_NAME
+    with manifest.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(MANIFEST_COLUMNS)
+        for e in entries:
+            values = (e.x_m, e.y_m, e.heading_deg)
+            writer.writerow(
+                [e.image, e.room, *("" if v is None else repr(float(v)) for v in values)]
+            )
+    return manifest
+
+
+def write_edges(dataset_dir: Path | str, edges: Iterable[tuple[str, str]]) -> Path:
+    """Write ``dataset_dir/edges.csv``: the header ``room_a,room_b`` and one row per edge, in
+    order. Returns its path; ``OSError`` if it cannot be written."""
+    path = Path(dataset_dir) / EDGES_NAME
+    with path.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(EDGES_COLUMNS)
+        writer.writerows(edges)
+    return path
 
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")

@@ -10,17 +10,17 @@ Layout of the folder::
 ``image`` is relative to the folder. ``x_m``, ``y_m`` and ``heading_deg`` are in the frame of the
 place's room: origin at the room's floor corner of smallest building x and y, axes parallel to
 the building axes (REP-103, heading counter-clockwise from the room's +x axis, in (-180, 180]).
-The format is :mod:`mapdb.dataset`'s; read a dataset back with :func:`mapdb.dataset.read_manifest`.
+The format is :mod:`mapdb.dataset`'s, written with its :func:`~mapdb.dataset.write_manifest` and
+:func:`~mapdb.dataset.write_edges`; read a dataset back with :func:`mapdb.dataset.read_manifest`.
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import shutil
 from collections import Counter
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import cv2
@@ -29,23 +29,12 @@ from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
 from localizer.robot_protocol import Pose2D
-from mapdb.dataset import EDGES_NAME, MANIFEST_COLUMNS, MANIFEST_NAME
+from mapdb.dataset import EDGES_NAME, MANIFEST_NAME, ManifestEntry, write_edges, write_manifest
 from robot.conditions import get_condition, world_under
 from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
 from robot.world import capture_places
 from robot.worlds import make_world
-
-
-@dataclass(frozen=True)
-class ManifestRow:
-    """One panorama of a dataset; position and heading in its room's frame (None if unknown)."""
-
-    image: str
-    room: str
-    x_m: float | None
-    y_m: float | None
-    heading_deg: float | None
 
 
 def prepare_folder(out_dir: Path, overwrite: bool) -> None:
@@ -109,11 +98,13 @@ def render_dataset(
         bgr = image if grey else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
         if not cv2.imwrite(str(out / name), bgr):
             raise OSError(f"could not write {out / name}")
-        rows.append(ManifestRow(name, place.room, place.x_m, place.y_m, round(heading, 6)))
+        rows.append(
+            ManifestEntry(name, out / name, place.room, place.x_m, place.y_m, round(heading, 6))
+        )
     _write_render_info(out, world_name, seed, condition, spacing_m or world.place_spacing_m, camera)
     edges = sorted({(min(d.room_a, d.room_b), max(d.room_a, d.room_b)) for d in world.doors})
-    write_edges(out / EDGES_NAME, edges)
-    return write_manifest(out / MANIFEST_NAME, rows)
+    write_edges(out, edges)
+    return write_manifest(out, rows)
 
 
 def _write_render_info(
@@ -122,23 +113,3 @@ def _write_render_info(
     info = {"world": world, "seed": seed, "condition": condition, "spacing_m": spacing_m}
     info["camera"] = asdict(camera)
     (out / "render.json").write_text(json.dumps(info, indent=2) + "\n")
-
-
-def write_edges(path: Path, edges: list[tuple[str, str]]) -> Path:
-    """Write the room graph's edges as ``room_a,room_b`` rows (header included); return ``path``."""
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(("room_a", "room_b"))
-        writer.writerows(edges)
-    return path
-
-
-def write_manifest(path: Path, rows: list[ManifestRow]) -> Path:
-    """Write ``rows`` as a manifest CSV (empty cells for unknown values); return ``path``."""
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(MANIFEST_COLUMNS)
-        for r in rows:
-            values = (r.x_m, r.y_m, r.heading_deg)
-            writer.writerow([r.image, r.room, *("" if v is None else repr(v) for v in values)])
-    return path

@@ -21,9 +21,9 @@ from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
 from localizer.panorama_io import read_grey_image
-from mapdb.dataset import EDGES_NAME, MANIFEST_NAME, read_dataset, read_edges
+from mapdb.dataset import ManifestEntry, read_dataset, read_edges, write_edges, write_manifest
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
-from robot.dataset import ManifestRow, prepare_folder, write_edges, write_manifest
+from robot.dataset import prepare_folder
 
 
 @dataclass(frozen=True)
@@ -117,9 +117,9 @@ def perturb_dataset(
         if not cv2.imwrite(str(out_dir / name), copy, params):
             raise OSError(f"cannot write {out_dir / name}")
         heading = rolled_heading_deg(entry.heading_deg, roll_px, width)
-        rows.append(ManifestRow(name, entry.room, entry.x_m, entry.y_m, heading))
+        rows.append(ManifestEntry(name, out_dir / name, entry.room, entry.x_m, entry.y_m, heading))
     kept = {row.room for row in rows}
     edges = [(a, b) for a, b in edges if a in kept and b in kept]
     if edges:
-        write_edges(out_dir / EDGES_NAME, edges)
-    return write_manifest(out_dir / MANIFEST_NAME, rows)
+        write_edges(out_dir, edges)
+    return write_manifest(out_dir, rows)

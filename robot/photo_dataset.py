@@ -20,9 +20,9 @@ from tqdm import tqdm
 
 from homing.bearings import wrap_angle_deg
 from localizer.robot_protocol import Pose2D
-from mapdb.dataset import EDGES_NAME, MANIFEST_NAME
+from mapdb.dataset import ManifestEntry, write_edges, write_manifest
 from robot.conditions import get_condition
-from robot.dataset import ManifestRow, prepare_folder, write_edges, write_manifest
+from robot.dataset import prepare_folder
 from robot.photo_library import load_photo, photo_room, photo_room_names
 from robot.photo_room import CAPTURE_HEIGHT_M, PhotoRoom, render_photo_room
 from robot.render import PanoramaCamera
@@ -77,7 +77,7 @@ def render_photo_dataset(
     out = Path(out_dir)
     prepare_folder(out, overwrite)
     rng = np.random.default_rng([seed, 1])
-    rows: list[ManifestRow] = []
+    rows: list[ManifestEntry] = []
     counts = dict.fromkeys(names, 0)
     for i, (box, (x_m, y_m)) in enumerate(tqdm(places, desc="photos", disable=not progress)):
         heading = float(rng.uniform(-180.0, 180.0)) if heading_deg is None else heading_deg
@@ -90,9 +90,9 @@ def render_photo_dataset(
         bgr = image if grey else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
         if not cv2.imwrite(str(out / name), bgr):
             raise OSError(f"could not write {out / name}")
-        rows.append(ManifestRow(name, box.name, x_m, y_m, round(heading, 6)))
+        rows.append(ManifestEntry(name, out / name, box.name, x_m, y_m, round(heading, 6)))
     info = {"world": "photos", "rooms": [asdict(b) for b in boxes], "seed": seed}
     info |= {"condition": condition, "spacing_m": spacing_m, "camera": asdict(camera)}
     (out / "render.json").write_text(json.dumps(info, indent=2) + "\n")
-    write_edges(out / EDGES_NAME, [])
-    return write_manifest(out / MANIFEST_NAME, rows)
+    write_edges(out, [])
+    return write_manifest(out, rows)

@@ -1,5 +1,5 @@
 """Reading a dataset: manifest.csv (columns, optional pose, errors naming file, line and column)
-or one sub-folder of panoramas per room."""
+or one sub-folder of panoramas per room; writing one that reads back the same."""
 
 from __future__ import annotations
 
@@ -8,18 +8,27 @@ from pathlib import Path
 
 import pytest
 
-from mapdb.dataset import read_dataset, read_edges, read_manifest, read_room_folders, sha256_file
+from mapdb.dataset import (
+    ManifestEntry,
+    read_dataset,
+    read_edges,
+    read_manifest,
+    read_room_folders,
+    sha256_file,
+    write_edges,
+    write_manifest,
+)
 from mapdb.errors import ManifestError
 
 
-def write_manifest(folder: Path, text: str) -> Path:
+def write_manifest_text(folder: Path, text: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "manifest.csv").write_text(text, encoding="utf-8")
     return folder
 
 
 def test_manifest_rows_with_and_without_pose(tmp_path: Path) -> None:
-    folder = write_manifest(
+    folder = write_manifest_text(
         tmp_path / "ds",
         "\ufeffimage,room,x_m,y_m,heading_deg,extra\n"
         "a.png,kitchen,1.5,-2,90,x\n"
@@ -35,8 +44,52 @@ def test_manifest_rows_with_and_without_pose(tmp_path: Path) -> None:
     assert (c.x_m, c.heading_deg) == (0.0, None)
 
 
+def test_a_written_manifest_reads_back_the_same_rows(tmp_path: Path) -> None:
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    written = [
+        ManifestEntry("images/a.png", folder / "images/a.png", "kitchen", 1.25, -0.1, 179.999999),
+        ManifestEntry("images/b, c.png", folder / "images/b, c.png", "hall", None, None, None),
+    ]
+    manifest = write_manifest(folder, written)
+    assert manifest.read_text().splitlines()[0] == "image,room,x_m,y_m,heading_deg"
+    assert manifest.read_text().splitlines()[2] == '"images/b, c.png",hall,,,'
+    read = read_manifest(folder)
+    assert [(e.image, e.path, e.room, e.x_m, e.y_m, e.heading_deg) for e in read] == [
+        (e.image, e.path, e.room, e.x_m, e.y_m, e.heading_deg) for e in written
+    ]
+    assert [e.line for e in read] == [2, 3]
+
+
+def test_a_written_edges_file_reads_back(tmp_path: Path) -> None:
+    write_edges(tmp_path, [("hall", "kitchen"), ("hall", "office")])
+    assert read_edges(tmp_path) == [("hall", "kitchen"), ("hall", "office")]
+
+
+@pytest.mark.parametrize(
+    ("pose", "message"),
+    [
+        ((1.0, None, 0.0), "give both x_m and y_m or neither"),
+        ((1.0, 2.0, float("inf")), "heading_deg must be a finite number"),
+        ((float("nan"), 2.0, 0.0), "x_m must be a finite number"),
+    ],
+)
+def test_an_entry_no_manifest_could_hold_is_refused(
+    tmp_path: Path, pose: tuple[float | None, float | None, float | None], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        ManifestEntry("a.png", tmp_path / "a.png", "hall", *pose)
+
+
+def test_an_entry_needs_an_image_and_a_room_name(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="image must not be empty"):
+        ManifestEntry(" ", tmp_path, "hall", None, None, None)
+    with pytest.raises(ValueError, match=r"room name .* control character"):
+        ManifestEntry("a.png", tmp_path / "a.png", "hall\nkitchen", None, None, None)
+
+
 def test_missing_column_is_named(tmp_path: Path) -> None:
-    folder = write_manifest(tmp_path / "ds", "image,room,x_m,heading_deg\na.png,hall,1,0\n")
+    folder = write_manifest_text(tmp_path / "ds", "image,room,x_m,heading_deg\na.png,hall,1,0\n")
     with pytest.raises(ManifestError, match=r"manifest\.csv lacks column\(s\) 'y_m'"):
         read_manifest(folder)
 
@@ -52,7 +105,7 @@ def test_missing_column_is_named(tmp_path: Path) -> None:
     ],
 )
 def test_bad_values_name_line_and_column(tmp_path: Path, row: str, message: str) -> None:
-    folder = write_manifest(tmp_path / "ds", f"image,room,x_m,y_m,heading_deg\n{row}\n")
+    folder = write_manifest_text(tmp_path / "ds", f"image,room,x_m,y_m,heading_deg\n{row}\n")
     with pytest.raises(ManifestError, match=message):
         read_manifest(folder)
 
@@ -91,7 +144,7 @@ def test_room_folders_give_one_entry_per_image_without_pose(tmp_path: Path) -> N
 def test_read_dataset_prefers_the_manifest(tmp_path: Path) -> None:
     folder = write_files(tmp_path / "ds", "kitchen/a.jpg")
     assert [e.room for e in read_dataset(folder)] == ["kitchen"]
-    write_manifest(folder, "image,room,x_m,y_m,heading_deg\nkitchen/a.jpg,pantry,1,2,0\n")
+    write_manifest_text(folder, "image,room,x_m,y_m,heading_deg\nkitchen/a.jpg,pantry,1,2,0\n")
     assert [e.room for e in read_dataset(folder)] == ["pantry"]
 
 
