@@ -15,7 +15,7 @@ import timeit
 import numpy as np
 
 from homing.alv import alv_from_bearings
-from homing.experiments import EXPERIMENTS
+from homing.thesis.experiments import EXPERIMENTS
 from toploc.evaluation.simulation import run_simulation
 
 

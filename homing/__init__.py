@@ -1,1 +1,3 @@
-"""ALV visual homing: landmark vectors, home vectors, visual compasses, the thesis simulation."""
+"""ALV visual homing: bearing conventions, landmark vectors and home vectors, visual compasses
+and home directions from two views (the runtime); the thesis reproduction is
+:mod:`homing.thesis`, which the runtime never imports."""

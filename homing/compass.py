@@ -18,6 +18,9 @@ Two methods, both working on circular histograms of bearings:
 Minimising eq. 5.4 is maximising the circular cross-correlation (the squared norms do not depend
 on the shift), so both use one FFT correlation; the histograms of a batch of views are rows of
 one array.
+
+:func:`compass_rotation_rad` and :func:`matched_rotation_rad` give the same rotation for a
+pair of views taken in the order (here, home), the second from descriptor matches.
 """
 
 from __future__ import annotations
@@ -137,3 +140,23 @@ def matched_shift_rad(
     resultant_y = (weight * np.sin(difference)).sum(axis=-1)
     shift = np.arctan2(resultant_y, resultant_x)
     return np.where(weight.sum(axis=-1) > 0, shift, np.nan)
+
+
+def compass_rotation_rad(bearings_here_rad: np.ndarray, bearings_home_rad: np.ndarray) -> float:
+    """Rotation home -> here from the smoothed bearing-histogram compass (headings unknown)."""
+    return bearing_shift_rad(bearings_home_rad, bearings_here_rad, method="smoothed")
+
+
+def matched_rotation_rad(
+    bearings_here_rad: np.ndarray, bearings_home_rad: np.ndarray, matches: np.ndarray
+) -> float:
+    """Rotation home -> here from matched features: the circular mean of their bearing changes
+    (:func:`matched_shift_rad` for index-pair matches).
+
+    ``matches`` (k, 2) holds ``[here_row, home_row]``. Parallax spreads the changes, but moving
+    in any direction shifts features on opposite sides in opposite senses, so the mean is near
+    the rotation. NaN when there are no matches.
+    """
+    m = np.asarray(matches, dtype=np.int64).reshape(-1, 2)
+    here, home = bearings_here_rad[m[:, 0]], bearings_home_rad[m[:, 1]]
+    return float(matched_shift_rad(home, here, np.ones(len(m), dtype=bool)))

@@ -60,7 +60,7 @@ import numpy as np
 from homing.alv import HomingError, alv_from_bearings, home_vector, matched_home_vector
 from homing.bearings import mean_direction_rad, wrap_angle_rad
 from homing.compass import CompassMethod, bearing_shift_rad, matched_shift_rad
-from homing.evaluation import alv_home_directions_rad
+from homing.home_directions import alv_home_directions_rad
 from localizer.cameras import CameraSpec
 from localizer.features import extract_preset, extract_with_camera
 from localizer.matching import match_descriptors

@@ -4,7 +4,7 @@ import json
 
 from click.testing import CliRunner
 
-from homing.experiments import ROW_KEYS
+from homing.thesis.experiments import ROW_KEYS
 from toploc.cli import main
 
 

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from homing.alv import HomingError
 from homing.compass import bearing_histograms, bearing_shift_rad, matched_shift_rad
-from homing.simulation import SimulationParams, project, sample_features
+from homing.thesis.simulation import SimulationParams, project, sample_features
 
 
 def wrapped_error_deg(a_rad: float, b_rad: float) -> float:

@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from homing.controller import GAIN_MIN, best_controller, matched_home_vectors
-from homing.simulation import (
+from homing.thesis.controller import GAIN_MIN, best_controller, matched_home_vectors
+from homing.thesis.simulation import (
     Outcome,
     RunState,
     SimulationParams,

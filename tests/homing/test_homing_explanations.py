@@ -5,7 +5,7 @@ from math import comb
 import pytest
 from click.testing import CliRunner
 
-from homing.explanations import (
+from homing.thesis.explanations import (
     CAUSES,
     explain,
     explain_row,
@@ -13,7 +13,7 @@ from homing.explanations import (
     format_explanations,
     medians_far,
 )
-from homing.reference import reference_key
+from homing.thesis.reference import reference_key
 from toploc.cli import main
 
 

@@ -5,10 +5,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from homing.controller import best_controller
-from homing.experiments import ROW_KEYS, Setting, settings, summarise
-from homing.reference import thesis_rows
-from homing.simulation import Outcome, SimulationParams, project, sample_features, simulate_runs
+from homing.thesis.controller import best_controller
+from homing.thesis.experiments import ROW_KEYS, Setting, settings, summarise
+from homing.thesis.reference import thesis_rows
+from homing.thesis.simulation import (
+    Outcome,
+    SimulationParams,
+    project,
+    sample_features,
+    simulate_runs,
+)
 
 
 def run(params: SimulationParams, runs: int = 10, seed: int = 0, best: bool = False):

@@ -3,6 +3,10 @@
 Floors, from the ground up (README, "Layout"): ``homing`` and the pure records
 (``mapdb.records``); ``mapdb``; ``localizer``; ``robot``; the shell ``toploc``. A module may
 import its own floor and the floors below it, never one above.
+
+The thesis reproduction (``homing.thesis``) stands on the ground floor beside the homing
+runtime, but only the shell imports it: the runtime (the rest of ``homing``, and ``mapdb``,
+``localizer``, ``robot``) never does.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("homing", "mapdb", "localizer", "robot", "toploc")
 FLOOR = {"homing": 0, "mapdb.records": 0, "mapdb": 1, "localizer": 2, "robot": 3, "toploc": 4}
 IO_LIBRARIES = ("sqlite3", "sqlite_utils", "zenoh", "serial", "click", "tqdm")
+REPRODUCTION = "homing.thesis"
 
 
 def floor_of(module: str) -> int | None:
@@ -68,6 +73,23 @@ def source_files() -> list[Path]:
     return sorted(p for package in PACKAGES for p in (REPO / package).rglob("*.py"))
 
 
+def is_within(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def reproduction_imports(paths: list[Path]) -> list[str]:
+    """Every import of the thesis reproduction by a module outside it and outside the shell."""
+    found = []
+    for path in paths:
+        here = module_name(path)
+        if is_within(here, REPRODUCTION) or is_within(here, "toploc"):
+            continue
+        for line, module in imported_modules(path):
+            if is_within(module, REPRODUCTION):
+                found.append(f"{path.relative_to(REPO)}:{line} imports {module}")
+    return found
+
+
 def test_every_package_module_is_on_a_floor() -> None:
     assert all(floor_of(module_name(path)) is not None for path in source_files())
 
@@ -85,6 +107,31 @@ def test_the_check_sees_an_upward_import(tmp_path: Path) -> None:
         bad.unlink()
 
 
+def test_the_runtime_does_not_import_the_thesis_reproduction() -> None:
+    assert reproduction_imports(source_files()) == []
+
+
+def test_the_check_sees_the_runtime_import_the_reproduction() -> None:
+    bad = REPO / "homing" / "_layout_probe.py"
+    try:
+        bad.write_text(
+            "from homing.alv import HomingError\n"
+            "def f():\n"
+            "    from .thesis.simulation import simulate_runs\n"
+        )
+        assert reproduction_imports([bad]) == [
+            "homing/_layout_probe.py:3 imports homing.thesis.simulation.simulate_runs"
+        ]
+    finally:
+        bad.unlink()
+
+
+def test_the_reproduction_and_the_shell_may_import_it() -> None:
+    allowed = [REPO / "homing/thesis/controller.py", REPO / "toploc/commands/simulate.py"]
+    assert all(any(is_within(m, REPRODUCTION) for _, m in imported_modules(p)) for p in allowed)
+    assert reproduction_imports(allowed) == []
+
+
 def test_records_stand_on_the_ground_floor() -> None:
     assert floor_of("mapdb.records.Place") == 0
     assert floor_of("mapdb.database") == 1
@@ -97,8 +144,8 @@ def test_a_core_loads_no_io_library(package: str) -> None:
     probe = (
         "import importlib, pkgutil, sys\n"
         f"import {package}\n"
-        f"for info in pkgutil.iter_modules({package}.__path__):\n"
-        f"    importlib.import_module('{package}.' + info.name)\n"
+        f"for info in pkgutil.walk_packages({package}.__path__, '{package}.'):\n"
+        f"    importlib.import_module(info.name)\n"
         f"print(' '.join(sorted(n for n in {IO_LIBRARIES!r} if n in sys.modules)))\n"
     )
     done = subprocess.run(

@@ -83,7 +83,7 @@ def align_command(
         }
         json_path.write_text(json.dumps(record, indent=2) + "\n")
     if plot_path is not None:
-        from homing.eval_plots import plot_alignment
+        from homing.thesis.eval_plots import plot_alignment
 
         plot_alignment(run.bins, run.errors_deg, plot_path, title=f"{dataset.name} {detector}")
         click.echo(f"wrote {plot_path}")

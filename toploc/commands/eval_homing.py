@@ -116,7 +116,7 @@ def load_and_extract(
 
 
 def _plot(run: HomingRun, path: Path, title: str) -> None:
-    from homing.eval_plots import plot_home_vectors
+    from homing.thesis.eval_plots import plot_home_vectors
 
     home_image = run.stats.best_home
     home = next(k for k, p in enumerate(run.places) if p.image == home_image)

@@ -9,8 +9,8 @@ from typing import cast
 
 import click
 
-from homing.experiments import EXPERIMENTS, WORLDS, Method
-from homing.report import format_tables, summarise_explanations
+from homing.thesis.experiments import EXPERIMENTS, WORLDS, Method
+from homing.thesis.report import format_tables, summarise_explanations
 from toploc.evaluation.simulation import run_simulation, simulation_tracks
 
 
@@ -89,7 +89,7 @@ def simulate(
     if summary["compared"]:
         click.echo(summarise_explanations(rows))
     if explain_path:
-        from homing.explanations import explain, format_explanations
+        from homing.thesis.explanations import explain, format_explanations
 
         explanations = explain(rows)
         explain_path.write_text(format_explanations(explanations))
@@ -98,7 +98,7 @@ def simulate(
         json_path.write_text(json.dumps(rows, indent=1))
         click.echo(f"wrote {len(rows)} rows to {json_path}")
     if plot_path:
-        from homing.plots import plot_simulation  # matplotlib only when asked for
+        from homing.thesis.plots import plot_simulation  # matplotlib only when asked for
 
         plot_simulation(rows, simulation_tracks(run), plot_path)
         click.echo(f"wrote {plot_path}")

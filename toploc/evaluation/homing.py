@@ -1,8 +1,9 @@
 """Homing and alignment on a panorama dataset (Goldhoorn 2008, sections 5.4 and 5.6-5.7).
 
-The adapter of :mod:`homing.evaluation`: reads a dataset folder (``manifest.csv`` + images),
-extracts one fingerprint per image (once per run; optionally in a *spawn* process pool), and
-evaluates every ordered pair of places of the same room (positions are in each room's frame).
+The adapter of :mod:`homing.home_directions` and :mod:`homing.thesis.evaluation`: reads a
+dataset folder (``manifest.csv`` + images), extracts one fingerprint per image (once per run;
+optionally in a *spawn* process pool), and evaluates every ordered pair of places of the same
+room (positions are in each room's frame).
 
 Methods (``METHODS``): ``"thesis"`` is the ALV of all feature bearings with the headings of the
 manifest (section 5.6). The others work without headings:
@@ -11,7 +12,7 @@ manifest (section 5.6). The others work without headings:
 * ``"matched-alv"``: the ALV of descriptor-matched features only, the rotation from the circular
   mean of their bearing changes;
 * ``"matched-vote"``: the home direction in the most wedges of matched features (see
-  :func:`homing.evaluation.wedge_vote_direction_rad`), the rotation as for ``matched-alv``;
+  :func:`homing.home_directions.wedge_vote_direction_rad`), the rotation as for ``matched-alv``;
 * ``"pose"``: the direction of the translation of the relative pose that the essential-matrix
   verification finds on the matched rays (:func:`localizer.verification.verify`, the same as
   the localizer's evidence; :func:`localizer.verification.home_direction_rad`), falling back
@@ -61,19 +62,19 @@ from tqdm import tqdm
 
 from homing.alv import alv_from_bearings, angular_error_deg
 from homing.bearings import signed_axis_rad
-from homing.compass import bearing_shift_rad
-from homing.evaluation import (
+from homing.compass import bearing_shift_rad, compass_rotation_rad, matched_rotation_rad
+from homing.home_directions import (
+    alv_home_directions_rad,
+    matched_alv_direction_rad,
+    wedge_vote_direction_rad,
+)
+from homing.thesis.evaluation import (
     DistanceBin,
     HomingStats,
-    alv_home_directions_rad,
-    compass_rotation_rad,
     errors_by_distance,
     homing_statistics,
-    matched_alv_direction_rad,
-    matched_rotation_rad,
     pair_errors_deg,
     true_home_direction_rad,
-    wedge_vote_direction_rad,
 )
 from localizer.cameras import parse_camera
 from localizer.features import DEFAULT_PARAMS, extract_with_camera

@@ -3,7 +3,7 @@
 The loops of ``toploc simulate``: every setting of the chosen experiments and worlds, once per
 method, ``runs`` runs each, on a spawned process pool (:mod:`mapdb.workers`); and, for the plot,
 the trajectories of each world's first setting. The experiments themselves (settings, seeds,
-summary rows) are :mod:`homing.experiments`.
+summary rows) are :mod:`homing.thesis.experiments`.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from homing.experiments import WORLDS, Method, Setting, run_row, run_setting, settings
-from homing.report import agreement
-from homing.simulation import SimulationParams
+from homing.thesis.experiments import WORLDS, Method, Setting, run_row, run_setting, settings
+from homing.thesis.report import agreement
+from homing.thesis.simulation import SimulationParams
 from mapdb.workers import spawn_process_pool
 
 # Runs per world whose trajectories are drawn (a plot of more is unreadable).
@@ -30,7 +30,7 @@ Tracks = dict[tuple[int, str], tuple[SimulationParams, list[np.ndarray]]]
 class SimulationRun:
     """What was simulated, and one row per (setting, method) in table order.
 
-    Each row has exactly the keys of :data:`homing.experiments.ROW_KEYS` (rates in 0..1).
+    Each row has exactly the keys of :data:`homing.thesis.experiments.ROW_KEYS` (rates in 0..1).
     """
 
     experiments: tuple[str, ...]
@@ -41,7 +41,8 @@ class SimulationRun:
     rows: list[dict[str, Any]]
 
     def agreement(self) -> dict[str, Any]:
-        """How many thesis-method rows agree with the paper: :func:`homing.report.agreement`."""
+        """How many thesis-method rows agree with the paper
+        (:func:`homing.thesis.report.agreement`)."""
         return agreement(self.rows)
 
 
@@ -52,7 +53,8 @@ def _tasks(
     runs: int,
     seed: int,
 ) -> list[tuple[Setting, Method, int, int]]:
-    """One picklable unit of work (:func:`homing.experiments.run_row`) per row, in table order."""
+    """One picklable unit of work (:func:`homing.thesis.experiments.run_row`) per row, in table
+    order."""
     return [
         (setting, method, runs, seed)
         for experiment in experiments

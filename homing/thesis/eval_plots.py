@@ -12,7 +12,7 @@ matplotlib.use("Agg")  # files only: toploc runs headless on robots and CI
 import matplotlib.pyplot as plt
 import numpy as np
 
-from homing.evaluation import DistanceBin
+from homing.thesis.evaluation import DistanceBin
 
 
 def plot_home_vectors(

@@ -14,8 +14,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from homing.controller import best_controller
-from homing.simulation import (
+from homing.thesis.controller import best_controller
+from homing.thesis.simulation import (
     BatchResult,
     Controller,
     Outcome,

@@ -25,7 +25,7 @@ def reference_key(experiment: str, world: int, parameter: str, value: float) -> 
 @cache
 def thesis_rows() -> dict[ReferenceKey, dict[str, Any]]:
     """All reference rows by key; numbers as floats, missing figures as ``None``."""
-    text = resources.files("homing").joinpath("reference/thesis_appendix_b.csv").read_text()
+    text = resources.files("homing.thesis").joinpath("reference/thesis_appendix_b.csv").read_text()
     rows: dict[ReferenceKey, dict[str, Any]] = {}
     for raw in csv.DictReader(text.splitlines()):
         row: dict[str, Any] = {

@@ -12,8 +12,8 @@ matplotlib.use("Agg")  # files only: toploc runs headless on robots and CI
 import matplotlib.pyplot as plt
 import numpy as np
 
-from homing.reference import reference_key, thesis_rows
-from homing.simulation import WORLD_WALLS, SimulationParams
+from homing.thesis.reference import reference_key, thesis_rows
+from homing.thesis.simulation import WORLD_WALLS, SimulationParams
 
 _WORLD_COLOURS = {1: "tab:blue", 2: "tab:orange", 3: "tab:green", 4: "tab:red"}
 

@@ -6,7 +6,7 @@ from collections.abc import Iterable
 from itertools import groupby
 from typing import Any
 
-from homing.reference import reference_key, thesis_rows
+from homing.thesis.reference import reference_key, thesis_rows
 
 _TITLES = {
     "B1": "Table B.1: first experiment, start (-1,-1), goal (1,1)",
@@ -93,7 +93,7 @@ def agreement(rows: Iterable[dict[str, Any]], tolerance: float = 0.2) -> dict[st
 
 def summarise_explanations(rows: Iterable[dict[str, Any]]) -> str:
     """How many thesis-method rows differ from the paper, counted by cause (see explanations)."""
-    from homing.explanations import CAUSES, explain  # scipy only when asked for
+    from homing.thesis.explanations import CAUSES, explain  # scipy only when asked for
 
     explanations = explain(rows)
     counts = {cause: sum(e.cause == cause for e in explanations) for cause in CAUSES}

@@ -46,7 +46,7 @@ import numpy as np
 
 from homing.alv import matched_home_vector, rotate_vectors_2d
 from homing.compass import matched_shift_rad
-from homing.simulation import RunState, SimulationParams, Views
+from homing.thesis.simulation import RunState, SimulationParams, Views
 
 PROBE_STEP_M = 0.1
 MAX_STEP_M = 1.0

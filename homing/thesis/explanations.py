@@ -23,7 +23,7 @@ or when both succeed in at least half of the runs and the iteration medians are 
    arrives before the distance limit, and after how many steps, varies widely.
 9. ``unexplained``: none of the above.
 
-Pure: rows in (dicts with :data:`homing.experiments.ROW_KEYS`), explanations out.
+Pure: rows in (dicts with :data:`homing.thesis.experiments.ROW_KEYS`), explanations out.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import fisher_exact
 
-from homing.reference import ReferenceKey, reference_key, thesis_rows
+from homing.thesis.reference import ReferenceKey, reference_key, thesis_rows
 
 CAUSES: dict[str, str] = {
     "sampling": "sampling: within what 20 runs each can give (Fisher p >= 0.05)",
