@@ -23,7 +23,8 @@ unrelated places: the map tells what chance looks like in its own rooms.
 Why this shape:
 
 - The ratio does not depend on the number of rooms, so 15 rooms do not cap one frame's
-  confidence (the softmax of :class:`SoftmaxLikelihood` did: a 29-versus-7 margin gave 25 %).
+  confidence (the softmax over rooms that toploc used before did: a 29-versus-7 margin gave
+  25 %).
 - Under "the robot is in room r", room r's count follows the same-room density and every other
   room's the other-room density, so the frame's likelihood of room r is proportional to
   ``L_r`` and a flat ``L`` means the frame cannot tell rooms apart.
@@ -358,40 +359,6 @@ def fit_ratio_likelihood(
         min_inliers=min_inliers,
         fit=fit,
     )
-
-
-@dataclass(frozen=True)
-class SoftmaxLikelihood:
-    """The uncalibrated model toploc used before :class:`RatioLikelihood`, kept for synthetic
-    experiments whose counts have no map to be calibrated on.
-
-    ``L_r = (1 - floor) * softmax(n / temperature_inliers)_r + floor / N`` (flat below
-    ``min_inliers``): it depends only on count differences and saturates, so N rooms cap one
-    frame at ``1 - floor + floor / N``.
-    """
-
-    temperature_inliers: float = 15.0
-    floor: float = 0.05
-    min_inliers: int = 20
-    count: str = "inliers"
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.temperature_inliers) and self.temperature_inliers > 0):
-            raise ValueError(
-                f"temperature_inliers must be positive and finite, got {self.temperature_inliers}"
-            )
-        if not 0.0 < self.floor <= 1.0:
-            raise ValueError(f"floor must be in (0, 1], got {self.floor}")
-        if self.min_inliers < 0:
-            raise ValueError(f"min_inliers must be >= 0, got {self.min_inliers}")
-
-    def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
-        """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
-        counts = _check_counts(room_inliers)
-        if counts.max() < self.min_inliers:
-            return np.full(counts.size, 1.0 / counts.size)
-        sharp = softmax(counts / self.temperature_inliers)
-        return (1.0 - self.floor) * sharp + self.floor / counts.size
 
 
 def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str], *, count: str) -> np.ndarray:

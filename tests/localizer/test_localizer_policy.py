@@ -8,10 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from softmax_likelihood import SoftmaxLikelihood
 
 from localizer.active import active_step
 from localizer.belief import BeliefFilter, RoomBelief
-from localizer.likelihood import SoftmaxLikelihood, room_likelihood
+from localizer.likelihood import room_likelihood
 from localizer.policy import (
     POLICIES,
     DiscriminativePolicy,
