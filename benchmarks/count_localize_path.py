@@ -12,7 +12,10 @@ module; a module *re-entered* ``k`` times has ``k + 1`` visits (the path left it
 module and came back ``k`` times). Printed: the distinct modules, the total of visits, and each
 module's visits and calls.
 
-    python benchmarks/count_localize_path.py [--db FILE --image IMAGE] [--detector sift]
+    python -m benchmarks.count_localize_path [--db FILE --image IMAGE] [--detector sift]
+
+(run from the repository, so that its packages are the ones imported: the code it counts is
+printed first).
 
 Without ``--db``, a small map of the rendered ``building`` world (512 x 96 px, 2 m spacing) is
 built in a temporary folder and one of its own panoramas is the query.
@@ -94,6 +97,7 @@ def main() -> None:
     parser.add_argument("--db", type=Path, help="a map database (default: a small one, built)")
     parser.add_argument("--image", type=Path, help="the query panorama (with --db)")
     parser.add_argument("--detector", default="sift")
+    parser.add_argument("--sequence", action="store_true", help="print the visits in order")
     args = parser.parse_args()
 
     from localizer.panorama_io import read_panorama
@@ -113,7 +117,9 @@ def main() -> None:
         calls = traced_modules(path)
     runs = visits(calls)
     per_module = Counter(calls)
-    print(f"query: {image}")
+    import localizer
+
+    print(f"code: {Path(localizer.__file__).parent.parent}; query: {image}")
     print(
         f"{len(runs)} modules, {sum(runs.values())} visits, "
         f"{sum(1 for n in runs.values() if n > 1)} modules visited more than once, "
@@ -122,6 +128,8 @@ def main() -> None:
     print(f"{'module':32s} {'visits':>6s} {'calls':>6s}")
     for module, n in sorted(runs.items(), key=lambda item: (-item[1], item[0])):
         print(f"{module:32s} {n:6d} {per_module[module]:6d}")
+    if args.sequence:
+        print(" -> ".join(m for i, m in enumerate(calls) if i == 0 or calls[i - 1] != m))
 
 
 if __name__ == "__main__":
