@@ -1,23 +1,16 @@
-"""Camera models of 360° panoramas: each maps a pixel to a unit ray in the robot frame and back.
+"""Which camera an image comes from, and the keypoint filters on its rows.
 
-Frames and conventions (DESIGN.md, REP-103: x forward, y left, z up, angles CCW positive):
-OpenCV pixel coordinates put pixel centres at integers, rows grow downwards. Every panorama is
-``W`` columns for 360°: column 0 looks along the robot's heading and columns increase clockwise,
-so a column ``x`` has azimuth ``-2*pi*x/W`` (:mod:`homing.bearings`, one convention for the
-localizer, homing and the renderer). Elevation is positive above the horizon; the models differ
-only in how rows map to elevations:
-
-- :class:`Cylinder`: rows on a cylinder of radius ``focal_px`` around the camera,
-  ``elevation = atan((horizon - y) / f)`` (the panoramas toploc renders and stitches; an
-  unwrapped mirror image is read as one, see :mod:`localizer.panorama_io`).
-- :class:`Equirect`: the whole sphere, ``H = W / 2`` rows for 180°, linear in elevation,
-  ``elevation = pi * ((H - 1) / 2 - y) / H`` (what Ricoh Theta, Insta360 and most 360°
-  cameras write).
+The camera models themselves (pixel <-> unit ray in the robot frame: :class:`~homing.cameras.
+Cylinder`, :class:`~homing.cameras.Equirect`) and their one factory live in
+:mod:`homing.cameras`, on the ground floor, so that a fingerprint carries its camera
+(:attr:`mapdb.records.Fingerprint.camera`) and the renderer draws with the same model.
 
 A camera is chosen per image from a :class:`CameraSpec` (``--camera auto|cylinder|equirect|
-omni:CX,CY,R0,R1``): ``auto`` reads a 2:1 image as equirectangular, anything else as a cylinder.
-A fingerprint records its camera in its extraction parameters (:func:`camera_of`), so every
-stored place keeps its own model and size.
+omni:CX,CY,R0,R1``) and the image's size, in one place (:func:`panorama_kind`): ``auto`` reads
+a 2:1 image as equirectangular and one at least :data:`MIN_CYLINDER_ASPECT` times as wide as
+high as a cylinder, and refuses any other (a 4:3 photo is no 360° panorama) unless its camera
+is named. An omnidirectional mirror image (``omni``) is unwrapped into a cylinder
+(:func:`localizer.panorama_io.unwrap_omni`).
 
 Everything here is pure numpy: scalars or arrays in, float arrays (or boolean masks) out.
 """
@@ -25,147 +18,27 @@ Everything here is pure numpy: scalars or arrays in, float arrays (or boolean ma
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from homing.bearings import bearing_rad_from_column, check_width_px, column_from_bearing
-from mapdb.records import Fingerprint, ParamValue
+from homing.cameras import CameraModel
 
 RowsSelection = Literal["all", "lower", "upper"]
 ROWS_SELECTIONS: tuple[str, ...] = ("all", "lower", "upper")
 CAMERA_KINDS: tuple[str, ...] = ("auto", "cylinder", "equirect", "omni")
 EQUIRECT_ASPECT_TOLERANCE = 0.01
 """``auto`` reads an image as equirectangular when ``|W / H - 2| <= 2 * tolerance``."""
+MIN_CYLINDER_ASPECT = 2.5
+"""``auto`` reads an image at least this many times as wide as high as a cylinder (toploc's
+own are 1024 x 192 and 512 x 96, 5.3:1; a cylinder of square pixels spanning up to 103° of
+elevation is wider than this), and refuses a narrower one that is not 2:1."""
 
 
-def _check_height(height_px: int) -> None:
-    if int(height_px) != height_px or height_px < 1:
-        raise ValueError(f"panorama height must be a positive integer, got {height_px!r}")
-
-
-def rays_from_angles(bearing_rad: ArrayLike, elevation_rad: ArrayLike) -> np.ndarray:
-    """(n, 3) float64 unit rays in the robot frame from azimuths and elevations (rad)."""
-    b = np.asarray(bearing_rad, dtype=np.float64).reshape(-1)
-    e = np.asarray(elevation_rad, dtype=np.float64).reshape(-1)
-    if b.shape != e.shape:
-        raise ValueError(f"{b.shape[0]} bearings but {e.shape[0]} elevations")
-    cos_e = np.cos(e)
-    return np.stack([cos_e * np.cos(b), cos_e * np.sin(b), np.sin(e)], axis=1)
-
-
-@dataclass(frozen=True)
-class Cylinder:
-    """A cylindrical panorama of ``width_px`` x ``height_px``.
-
-    ``focal_px`` is the cylinder radius in pixels (distance from the projection centre to the
-    image surface). ``None`` assumes square pixels on the cylinder, ``W / (2*pi)``: one column is
-    as wide in angle as one row is high at the horizon. Unwrapped mirror images are not true
-    cylinders (rows follow the mirror profile); pass a calibrated focal length for them.
-    ``horizon_row_px`` is the row coordinate of zero elevation; ``None`` means the image centre
-    row ``(H - 1) / 2``.
-    """
-
-    width_px: int
-    height_px: int
-    focal_px: float | None = None
-    horizon_row_px: float | None = None
-    kind: ClassVar[str] = "cylinder"
-
-    def __post_init__(self) -> None:
-        check_width_px(self.width_px)
-        _check_height(self.height_px)
-        if self.focal_px is not None and not (np.isfinite(self.focal_px) and self.focal_px > 0):
-            raise ValueError(f"focal_px must be a positive finite number, got {self.focal_px!r}")
-        if self.horizon_row_px is not None and not np.isfinite(self.horizon_row_px):
-            raise ValueError(f"horizon_row_px must be finite, got {self.horizon_row_px!r}")
-
-    @property
-    def f_px(self) -> float:
-        """The focal length in pixels actually used (the default resolved)."""
-        return float(self.width_px / (2.0 * np.pi) if self.focal_px is None else self.focal_px)
-
-    @property
-    def horizon_px(self) -> float:
-        """The horizon row coordinate actually used (the default resolved)."""
-        return float(
-            (self.height_px - 1) / 2.0 if self.horizon_row_px is None else self.horizon_row_px
-        )
-
-    def elevation_rad(self, y_px: ArrayLike) -> np.ndarray:
-        """Elevation (rad, positive up) of row coordinate ``y_px``: a point ``h - y`` pixels
-        above the horizon row ``h`` of a cylinder of radius ``f`` is seen at ``atan((h - y)/f)``."""
-        return np.arctan2(self.horizon_px - np.asarray(y_px, dtype=float), self.f_px)
-
-    def row_px(self, elevation_rad: ArrayLike) -> np.ndarray:
-        """Row coordinate at which ``elevation_rad`` (in (-pi/2, pi/2)) is imaged."""
-        return self.horizon_px - self.f_px * np.tan(np.asarray(elevation_rad, dtype=float))
-
-    def params(self) -> dict[str, ParamValue]:
-        """What a fingerprint records of this camera (see :func:`camera_from_params`)."""
-        record: dict[str, ParamValue] = {"camera": self.kind}
-        if self.focal_px is not None:
-            record["focal_px"] = float(self.focal_px)
-        if self.horizon_row_px is not None:
-            record["horizon_row_px"] = float(self.horizon_row_px)
-        return record
-
-
-@dataclass(frozen=True)
-class Equirect:
-    """An equirectangular panorama of ``width_px`` x ``height_px`` (the full sphere: 360° by
-    180°, normally ``W = 2 H``); rows are linear in elevation, row 0 next to the zenith."""
-
-    width_px: int
-    height_px: int
-    kind: ClassVar[str] = "equirect"
-
-    def __post_init__(self) -> None:
-        check_width_px(self.width_px)
-        _check_height(self.height_px)
-
-    @property
-    def horizon_px(self) -> float:
-        """The row coordinate of the horizon, ``(H - 1) / 2``."""
-        return (self.height_px - 1) / 2.0
-
-    def elevation_rad(self, y_px: ArrayLike) -> np.ndarray:
-        """Elevation (rad, positive up) of row coordinate ``y_px``: ``pi * (h - y) / H``."""
-        return np.pi * (self.horizon_px - np.asarray(y_px, dtype=float)) / self.height_px
-
-    def row_px(self, elevation_rad: ArrayLike) -> np.ndarray:
-        """Row coordinate at which ``elevation_rad`` (in [-pi/2, pi/2]) is imaged."""
-        return self.horizon_px - np.asarray(elevation_rad, dtype=float) * self.height_px / np.pi
-
-    def params(self) -> dict[str, ParamValue]:
-        """What a fingerprint records of this camera (see :func:`camera_from_params`)."""
-        return {"camera": self.kind}
-
-
-PanoramaCamera = Cylinder | Equirect
-
-
-def rays_from_pixels(camera: PanoramaCamera, xy_px: ArrayLike) -> np.ndarray:
-    """(n, 3) float64 unit rays in the robot frame of OpenCV pixel coordinates ``xy_px`` (n, 2)."""
-    xy = np.asarray(xy_px, dtype=np.float64).reshape(-1, 2)
-    bearing = bearing_rad_from_column(xy[:, 0], camera.width_px)
-    return rays_from_angles(bearing, camera.elevation_rad(xy[:, 1]))
-
-
-def pixels_from_rays(camera: PanoramaCamera, rays: ArrayLike) -> np.ndarray:
-    """(n, 2) OpenCV pixel coordinates at which the robot-frame rays (n, 3) are imaged (columns
-    in [0, W)); the inverse of :func:`rays_from_pixels`."""
-    r = np.asarray(rays, dtype=np.float64).reshape(-1, 3)
-    bearing = np.arctan2(r[:, 1], r[:, 0])
-    elevation = np.arctan2(r[:, 2], np.hypot(r[:, 0], r[:, 1]))
-    x = column_from_bearing(bearing, camera.width_px)
-    return np.column_stack([x, camera.row_px(elevation)])
-
-
-# --- which camera an image comes from -------------------------------------------------------------
+class NotPanoramaError(ValueError):
+    """An image whose size is no 360° panorama's for the camera it is read with."""
 
 
 @dataclass(frozen=True)
@@ -253,95 +126,94 @@ def is_equirect_size(width_px: int, height_px: int) -> bool:
     return abs(width_px / height_px - 2.0) <= 2.0 * EQUIRECT_ASPECT_TOLERANCE
 
 
-def panorama_kind(spec: CameraSpec, width_px: int, height_px: int) -> str:
+def panorama_kind(spec: CameraSpec, width_px: int, height_px: int, source: str = "image") -> str:
     """``"cylinder"`` or ``"equirect"``: the model of a panorama of this size under ``spec``
-    (an unwrapped mirror image is a cylinder)."""
-    if spec.kind == "auto":
-        return "equirect" if is_equirect_size(width_px, height_px) else "cylinder"
-    return "cylinder" if spec.kind == "omni" else spec.kind
-
-
-# --- the camera of a fingerprint ------------------------------------------------------------------
-
-
-def camera_from_params(
-    width_px: int, height_px: int, params: Mapping[str, ParamValue]
-) -> PanoramaCamera:
-    """The camera of a ``width_px`` x ``height_px`` panorama whose extraction ``params`` record
-    ``camera`` (absent in maps made before cameras were recorded: a cylinder), and for a
-    cylinder ``focal_px`` and ``horizon_row_px`` when known."""
-    kind = params.get("camera", "cylinder")
-    if kind == "equirect":
-        return Equirect(int(width_px), int(height_px))
-    if kind != "cylinder":
-        raise ValueError(f"unknown camera {kind!r} in extraction parameters")
-    focal = params.get("focal_px")
-    horizon = params.get("horizon_row_px")
-    return Cylinder(
-        int(width_px),
-        int(height_px),
-        None if focal is None else float(focal),
-        None if horizon is None else float(horizon),
-    )
-
-
-def camera_of(fingerprint: Fingerprint) -> PanoramaCamera:
-    """The camera a fingerprint was extracted on (see :func:`camera_from_params`)."""
-    return camera_from_params(
-        fingerprint.image_width_px, fingerprint.image_height_px, fingerprint.params
+    (an unwrapped mirror image is a cylinder). ``auto`` refuses an image that is neither 2:1
+    nor at least :data:`MIN_CYLINDER_ASPECT`:1 with a :class:`NotPanoramaError` naming
+    ``source``, its size, what a 360° panorama looks like and how to name its camera; a named
+    camera is taken at its word."""
+    if spec.kind == "omni":
+        return "cylinder"
+    if spec.kind != "auto":
+        return spec.kind
+    if is_equirect_size(width_px, height_px):
+        return "equirect"
+    if width_px >= MIN_CYLINDER_ASPECT * height_px:
+        return "cylinder"
+    raise NotPanoramaError(
+        f"{source}: {width_px}x{height_px} px ({width_px / height_px:.2f}:1) is not a 360° "
+        f"panorama: an equirectangular one is 2:1 (e.g. 2048x1024), a cylindrical one at least "
+        f"{MIN_CYLINDER_ASPECT:g}:1 (e.g. 1024x192); if it is one, name its camera with "
+        f"--camera equirect or --camera cylinder"
     )
 
 
 # --- masks on rows --------------------------------------------------------------------------------
 
 
-def horizon_band_mask(
-    y_px: ArrayLike, camera: PanoramaCamera, band_deg: float | None
-) -> np.ndarray:
+def horizon_band_mask(y_px: ArrayLike, camera: CameraModel, band_deg: float | None) -> np.ndarray:
     """True where row coordinate ``y_px`` is within ±``band_deg`` degrees of the horizon.
 
     ``band_deg=None`` keeps everything. Pass ``np.arange(H)`` for a per-row mask of the image, or
     keypoint y coordinates to filter keypoints.
     """
-    y = np.asarray(y_px, dtype=float)
-    if band_deg is None:
-        return np.ones(y.shape, dtype=bool)
-    if not (np.isfinite(band_deg) and 0.0 <= band_deg < 90.0):
-        raise ValueError(f"band_deg must be in [0, 90), got {band_deg!r}")
-    # A hair of slack so a row lying exactly on the band edge is kept despite rounding.
-    return np.abs(camera.elevation_rad(y)) <= np.deg2rad(band_deg) + 1e-12
+    return rows_kept(y_px, camera, band_deg=band_deg)
 
 
 def elevation_mask(
     y_px: ArrayLike,
-    camera: PanoramaCamera,
+    camera: CameraModel,
     min_elevation_deg: float | None,
     max_elevation_deg: float | None,
 ) -> np.ndarray:
     """True where row coordinate ``y_px`` is seen between the two elevations (degrees; ``None``:
     no limit on that side). This leaves out the nadir (tripod, robot body) and the zenith
     (ceiling lamps) of a spherical panorama."""
-    elevation_deg = np.rad2deg(camera.elevation_rad(y_px))
-    keep = np.ones(elevation_deg.shape, dtype=bool)
-    if min_elevation_deg is not None:
-        keep &= elevation_deg >= min_elevation_deg
-    if max_elevation_deg is not None:
-        keep &= elevation_deg <= max_elevation_deg
-    return keep
+    return rows_kept(
+        y_px, camera, min_elevation_deg=min_elevation_deg, max_elevation_deg=max_elevation_deg
+    )
 
 
-def rows_mask(y_px: ArrayLike, camera: PanoramaCamera, rows: RowsSelection) -> np.ndarray:
+def rows_mask(y_px: ArrayLike, camera: CameraModel, rows: RowsSelection) -> np.ndarray:
     """True where row coordinate ``y_px`` lies in the selected half of the panorama.
 
     ``"lower"`` is at or below the horizon row (``y >= h``; closer objects, thesis §5.9),
     ``"upper"`` strictly above it (``y < h``), so the two halves partition the image;
     ``"all"`` keeps everything.
     """
+    return rows_kept(y_px, camera, rows=rows)
+
+
+def rows_kept(
+    y_px: ArrayLike,
+    camera: CameraModel,
+    band_deg: float | None = None,
+    min_elevation_deg: float | None = None,
+    max_elevation_deg: float | None = None,
+    rows: str = "all",
+) -> np.ndarray:
+    """True where row coordinate ``y_px`` passes every filter at once: the horizon band of
+    ±``band_deg`` degrees, the elevations between ``min_elevation_deg`` and
+    ``max_elevation_deg`` (degrees; None: no limit) and the ``rows`` half (see
+    :func:`horizon_band_mask`, :func:`elevation_mask`, :func:`rows_mask`)."""
+    if rows not in ROWS_SELECTIONS:
+        raise ValueError(f"rows must be one of {ROWS_SELECTIONS}, got {rows!r}")
+    if band_deg is not None and not (np.isfinite(band_deg) and 0.0 <= band_deg < 90.0):
+        raise ValueError(f"band_deg must be in [0, 90), got {band_deg!r}")
     y = np.asarray(y_px, dtype=float)
-    if rows == "all":
-        return np.ones(y.shape, dtype=bool)
+    keep = np.ones(y.shape, dtype=bool)
+    if band_deg is not None or min_elevation_deg is not None or max_elevation_deg is not None:
+        elevation_rad = camera.elevation_rad(y)
+        elevation_deg = np.rad2deg(elevation_rad)
+        if band_deg is not None:
+            # A hair of slack so a row lying exactly on the band edge is kept despite rounding.
+            keep &= np.abs(elevation_rad) <= np.deg2rad(band_deg) + 1e-12
+        if min_elevation_deg is not None:
+            keep &= elevation_deg >= min_elevation_deg
+        if max_elevation_deg is not None:
+            keep &= elevation_deg <= max_elevation_deg
     if rows == "lower":
-        return y >= camera.horizon_px
-    if rows == "upper":
-        return y < camera.horizon_px
-    raise ValueError(f"rows must be one of {ROWS_SELECTIONS}, got {rows!r}")
+        keep &= y >= camera.horizon_px
+    elif rows == "upper":
+        keep &= y < camera.horizon_px
+    return keep

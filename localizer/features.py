@@ -2,9 +2,12 @@
 
 ``extract(image, params)`` takes a grey ``uint8`` panorama (column 0 along the heading, columns
 clockwise; see :mod:`homing.bearings`) and returns a :class:`~mapdb.records.Fingerprint`.
-``params.camera`` names its camera model (:mod:`localizer.cameras`: ``cylinder`` or
-``equirect``); :func:`extract_panorama` chooses it from a :class:`~localizer.cameras.CameraSpec`
-(``auto``: a 2:1 image is equirectangular) with per-camera defaults (:data:`CAMERA_DEFAULTS`).
+``params.camera`` names its camera model (:mod:`homing.cameras`: ``cylinder`` or ``equirect``),
+built once per panorama and carried by its fingerprint (``Fingerprint.camera``);
+:func:`extract_with_camera` chooses it from a :class:`~localizer.cameras.CameraSpec` and the
+image's size (:func:`localizer.cameras.panorama_kind`: ``auto`` reads a 2:1 image as
+equirectangular and refuses one that is no 360° panorama) with per-camera defaults
+(:data:`CAMERA_DEFAULTS`).
 
 - ``"sift"``: Lowe's DoG keypoints with SIFT descriptors (``cv2.SIFT_create``).
 - ``"mser"``: maximally stable extremal regions (``cv2.MSER_create``); each region becomes a
@@ -53,17 +56,8 @@ import cv2
 import numpy as np
 
 from homing.bearings import bearing_rad_from_column, wrap_angle_deg
-from localizer.cameras import (
-    ROWS_SELECTIONS,
-    CameraSpec,
-    Cylinder,
-    Equirect,
-    PanoramaCamera,
-    elevation_mask,
-    horizon_band_mask,
-    panorama_kind,
-    rows_mask,
-)
+from homing.cameras import CAMERA_MODELS, camera_from_params
+from localizer.cameras import ROWS_SELECTIONS, CameraSpec, panorama_kind, rows_kept
 from localizer.panorama_io import unwrap_omni
 from mapdb.records import Fingerprint
 
@@ -130,8 +124,8 @@ class ExtractionParams:
             raise ValueError(f"rows must be one of {ROWS_SELECTIONS}, got {self.rows!r}")
         if self.descriptor not in ("sift", "rootsift"):
             raise ValueError(f"descriptor must be sift or rootsift, got {self.descriptor!r}")
-        if self.camera not in ("cylinder", "equirect"):
-            raise ValueError(f"camera must be cylinder or equirect, got {self.camera!r}")
+        if self.camera not in CAMERA_MODELS:
+            raise ValueError(f"camera must be one of {CAMERA_MODELS}, got {self.camera!r}")
         if self.max_width_px is not None and self.max_width_px < 8:
             raise ValueError(f"max_width_px must be None or >= 8, got {self.max_width_px!r}")
         low, high = self.min_elevation_deg, self.max_elevation_deg
@@ -389,13 +383,6 @@ def _shrunk(image: np.ndarray, params: ExtractionParams) -> tuple[np.ndarray, Ex
     )
 
 
-def camera_for(params: ExtractionParams, width_px: int, height_px: int) -> PanoramaCamera:
-    """The camera model ``params`` name, for a panorama of this size."""
-    if params.camera == "equirect":
-        return Equirect(width_px, height_px)
-    return Cylinder(width_px, height_px, params.focal_px, params.horizon_row_px)
-
-
 def _detect_strip(
     padded: np.ndarray, params: ExtractionParams, start_px: int, stop_px: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -453,10 +440,15 @@ def extract(
         return Fingerprint.empty(params.detector, w, h, SIFT_DESCRIPTOR_SIZE, record)
     keep = ~_seam_duplicates(xy, size, angle_deg, w)
 
-    camera = camera_for(params, w, h)
-    keep &= horizon_band_mask(xy[:, 1], camera, params.band_deg)
-    keep &= elevation_mask(xy[:, 1], camera, params.min_elevation_deg, params.max_elevation_deg)
-    keep &= rows_mask(xy[:, 1], camera, params.rows)  # type: ignore[arg-type]
+    camera = camera_from_params(w, h, record)
+    keep &= rows_kept(
+        xy[:, 1],
+        camera,
+        params.band_deg,
+        params.min_elevation_deg,
+        params.max_elevation_deg,
+        params.rows,
+    )
     index = np.flatnonzero(keep)
     if params.max_keypoints is not None and len(index) > params.max_keypoints:
         strength = response if params.detector == "sift" else size
@@ -471,6 +463,7 @@ def extract(
         bearings_rad=bearing_rad_from_column(xy[index, 0], w),
         descriptors=descriptors[index],
         params=record,
+        camera_model=camera,
     )
 
 
@@ -484,15 +477,18 @@ def extract_with_camera(
     camera: CameraSpec,
     preset: str = "sift",
     threads: int = 1,
+    source: str = "image",
     **overrides: Any,
 ) -> Fingerprint:
     """``extract`` on a 360° camera image: a mirror image (``camera`` omni) is unwrapped into a
     cylinder first; the camera model is chosen by ``camera`` from the panorama's size, with that
     model's :data:`CAMERA_DEFAULTS` under the preset and ``overrides`` over everything.
-    ``threads``: see :func:`extract`."""
+    ``threads``: see :func:`extract`. An image that is no 360° panorama for ``camera``
+    raises :class:`~localizer.cameras.NotPanoramaError` naming ``source``
+    (:func:`~localizer.cameras.panorama_kind`)."""
     image = _check_image(image)
     if camera.mirror is not None:
-        image = unwrap_omni(image, camera.mirror)
-    kind = panorama_kind(camera, image.shape[1], image.shape[0])
+        image = unwrap_omni(image, camera.mirror, source)
+    kind = panorama_kind(camera, image.shape[1], image.shape[0], source)
     merged = {**CAMERA_DEFAULTS[kind], "camera": kind, **overrides}
     return extract(image, params_from_preset(preset, **merged), threads)

@@ -190,22 +190,25 @@ class Localizer:
         self.filter.reset(prior if sum(prior.values()) > 0 else None)
         return self.belief()
 
-    def extract(self, image: np.ndarray) -> Fingerprint:
+    def extract(self, image: np.ndarray, source: str = "image") -> Fingerprint:
         """The fingerprint of a camera image (grey or BGR uint8) with the map's detector,
         contrast equalisation and keypoint cap (:func:`localizer.features.matching_overrides`),
-        read through the configured camera model."""
+        read through the configured camera model; ``source`` names the image if its size is
+        no 360° panorama's (:class:`~localizer.cameras.NotPanoramaError`)."""
         return extract_with_camera(
             to_grey(image),
             self.config.camera,
             self.config.detector,
             threads=self.config.extraction_threads,
+            source=source,
             **self._overrides,
         )
 
-    def observe(self, image: np.ndarray) -> Observation:
-        """Extract and gather evidence against the map; the belief is not changed."""
+    def observe(self, image: np.ndarray, source: str = "image") -> Observation:
+        """Extract and gather evidence against the map; the belief is not changed. ``source``
+        names the image in errors (see :meth:`extract`)."""
         t0 = time.perf_counter()
-        fingerprint = self.extract(image)
+        fingerprint = self.extract(image, source)
         extraction_ms = (time.perf_counter() - t0) * 1e3
         return self.observe_fingerprint(fingerprint, extraction_ms)
 
@@ -265,10 +268,12 @@ class Localizer:
             thresholds = replace(thresholds, localized_ratio=ratio)
         return thresholds
 
-    def localize_once(self, image: np.ndarray) -> tuple[RoomBelief, Observation]:
-        """One-shot: uniform prior, one update with ``image``."""
+    def localize_once(
+        self, image: np.ndarray, source: str = "image"
+    ) -> tuple[RoomBelief, Observation]:
+        """One-shot: uniform prior, one update with ``image`` (named ``source`` in errors)."""
         self.reset()
-        observation = self.observe(image)
+        observation = self.observe(image, source)
         return self.update(observation), observation
 
     def similarity(self, rows: tuple[int, ...], columns: tuple[int, ...] = ()) -> PlaceSimilarity:

@@ -2,8 +2,8 @@
 
 A keypoint at azimuth ``b`` (CCW from the heading, see :mod:`homing.bearings`) and elevation
 ``e`` (positive up) has the unit ray ``(cos e cos b, cos e sin b, sin e)``. The elevation comes
-from the keypoint's row through the panorama's camera model (:mod:`localizer.cameras`: a
-cylinder or an equirectangular sphere), recorded in each fingerprint's extraction parameters.
+from the keypoint's row through the panorama's camera model (:mod:`homing.cameras`: a
+cylinder or an equirectangular sphere), which each fingerprint carries (``Fingerprint.camera``).
 These rays are what the essential-matrix verification (:mod:`localizer.verification`) consumes.
 """
 
@@ -11,39 +11,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from localizer.cameras import PanoramaCamera, camera_from_params, camera_of, rays_from_angles
+from homing.cameras import CameraModel, rays_from_angles
 from mapdb.records import Fingerprint, FingerprintTable
 
 
 def rays_from_keypoints(
-    keypoints_xy: np.ndarray, bearings_rad: np.ndarray, camera: PanoramaCamera
+    keypoints_xy: np.ndarray, bearings_rad: np.ndarray, camera: CameraModel
 ) -> np.ndarray:
     """(n, 3) unit rays from stored bearings (rad) and the rows of ``keypoints_xy`` (px)."""
     xy = np.asarray(keypoints_xy, dtype=np.float64).reshape(-1, 2)
     return rays_from_angles(bearings_rad, camera.elevation_rad(xy[:, 1]))
 
 
-def rays_from_fingerprint(fp: Fingerprint, camera: PanoramaCamera | None = None) -> np.ndarray:
-    """(n, 3) float64 unit rays (robot frame, REP-103) of the keypoints of ``fp``, row ``i`` for
-    keypoint ``i``. ``camera`` defaults to :func:`~localizer.cameras.camera_of` ``(fp)``; an
-    empty fingerprint gives shape (0, 3)."""
-    camera = camera_of(fp) if camera is None else camera
-    if camera.width_px != fp.image_width_px or camera.height_px != fp.image_height_px:
-        raise ValueError(
-            f"{camera.kind} is {camera.width_px}x{camera.height_px} px but the fingerprint's "
-            f"panorama is {fp.image_width_px}x{fp.image_height_px} px"
-        )
-    return rays_from_keypoints(fp.keypoints_xy, fp.bearings_rad, camera)
+def rays_from_fingerprint(fp: Fingerprint) -> np.ndarray:
+    """(n, 3) float64 unit rays (robot frame, REP-103) of the keypoints of ``fp`` through its
+    own camera (``fp.camera``), row ``i`` for keypoint ``i``; an empty fingerprint gives shape
+    (0, 3)."""
+    return rays_from_keypoints(fp.keypoints_xy, fp.bearings_rad, fp.camera)
 
 
 def rays_from_table(table: FingerprintTable) -> np.ndarray:
     """(N, 3) float64 unit rays of every stacked keypoint of ``table``, each place through its
-    own camera (its image size and extraction parameters); row ``r`` for the table's row ``r``."""
+    own camera (``table.cameras``); row ``r`` for the table's row ``r``."""
     rays = np.zeros((len(table.bearings_rad), 3))
-    for i in range(len(table.place_ids)):
+    for i, camera in enumerate(table.cameras):
         rows = table.rows(i)
-        width, height = table.image_sizes_px[i]
-        camera = camera_from_params(width, height, table.params[i])
         rays[rows] = rays_from_keypoints(table.keypoints_xy[rows], table.bearings_rad[rows], camera)
     return rays
 

@@ -10,14 +10,14 @@ from __future__ import annotations
 import math
 import unicodedata
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import InitVar, asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-ParamValue = float | int | str | bool
-"""A value of a fingerprint's extraction parameters."""
+from homing.cameras import CameraModel, ParamValue, camera_from_params
 
 MAX_NAME_CHARS = 128
 """The longest name the map stores, in characters: room names, and every other name-like
@@ -148,7 +148,12 @@ class Fingerprint:
     the cylindrical panorama of ``image_width_px`` x ``image_height_px``. ``bearings_rad`` are
     robot-frame azimuths (REP-103: counter-clockwise positive, 0 along the heading), which for a
     cylindrical panorama is ``-2*pi*x/W`` wrapped to (-pi, pi]. ``descriptors`` are float32 rows
-    (128 values for SIFT). ``params`` records how they were extracted (for the map database).
+    (128 values for SIFT). ``params`` records how they were extracted (for the map database),
+    among them the camera model (:func:`homing.cameras.camera_from_params`).
+
+    ``camera`` is the panorama's camera model (:mod:`homing.cameras`), built once: the
+    ``camera_model`` given (the one the extraction used; it must be of the image's size), else
+    the one ``params`` record.
     """
 
     detector: str
@@ -158,8 +163,24 @@ class Fingerprint:
     bearings_rad: np.ndarray
     descriptors: np.ndarray
     params: Mapping[str, ParamValue] = field(default_factory=dict)
+    camera_model: InitVar[CameraModel | None] = None
+    camera: CameraModel = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, camera_model: CameraModel | None) -> None:
+        if camera_model is None:
+            camera_model = camera_from_params(
+                self.image_width_px, self.image_height_px, self.params
+            )
+        elif (camera_model.width_px, camera_model.height_px) != (
+            self.image_width_px,
+            self.image_height_px,
+        ):
+            raise ValueError(
+                f"{camera_model.kind} camera is {camera_model.width_px}x{camera_model.height_px}"
+                f" px but the fingerprint's panorama is {self.image_width_px}x"
+                f"{self.image_height_px} px"
+            )
+        object.__setattr__(self, "camera", camera_model)
         n = len(self.bearings_rad)
         if self.keypoints_xy.shape != (n, 2):
             raise ValueError(
@@ -204,6 +225,7 @@ class Fingerprint:
             keypoints_xy=self.keypoints_xy[mask],
             bearings_rad=self.bearings_rad[mask],
             descriptors=self.descriptors[mask],
+            camera_model=self.camera,
         )
 
 
@@ -291,6 +313,15 @@ class FingerprintTable:
             params=tuple(fp.params for fp in fingerprints),
         )
 
+    @cached_property
+    def cameras(self) -> tuple[CameraModel, ...]:
+        """Each place's camera model, from its image size and extraction parameters (built
+        once per table)."""
+        return tuple(
+            camera_from_params(int(w), int(h), params)
+            for (w, h), params in zip(self.image_sizes_px, self.params, strict=True)
+        )
+
     @property
     def keypoint_place_index(self) -> np.ndarray:
         """For each stacked row, the index of its place in ``place_ids``."""
@@ -312,6 +343,7 @@ class FingerprintTable:
             bearings_rad=self.bearings_rad[rows],
             descriptors=self.descriptors[rows],
             params=self.params[i],
+            camera_model=self.cameras[i],
         )
 
     def subset(self, places: Sequence[int] | np.ndarray) -> FingerprintTable:

@@ -3,8 +3,8 @@
 A :class:`PhotoRoom` is an axis-aligned box (room frame, REP-103, metres: floor ``z = 0`` at
 ``0 <= x <= size_x``, ``0 <= y <= size_y``, ceiling at ``height_m``) and the point the photo was
 taken from, ``capture_height_m`` above the floor. The photo's column 0 looks along the room's +x
-axis, and its pixels follow the panorama conventions (:mod:`homing.bearings`): column ``x`` has
-azimuth ``-2*pi*x/W``, row ``y`` elevation ``pi * ((H - 1) / 2 - y) / H``.
+axis, and its pixels follow the equirectangular camera model (:class:`homing.cameras.Equirect`):
+column ``x`` has azimuth ``-2*pi*x/W``, row ``y`` elevation ``pi * ((H - 1) / 2 - y) / H``.
 
 Rendering from a pose (room frame) with a :class:`~robot.render.PanoramaCamera` (equirect or
 cylinder, ``camera.height_m`` above the floor): each output pixel's ray, robot frame rotated by
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from homing.bearings import column_from_bearing
+from homing.cameras import Equirect, pixels_from_rays
 from localizer.robot_protocol import Pose2D
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
 from robot.render import PanoramaCamera
@@ -91,11 +91,8 @@ def photo_pixel_of(
     (..., 3): the direction from the capture point to each point."""
     width_px, height_px = photo_size_px
     v = points_m - room.capture_point_m
-    azimuth = np.arctan2(v[..., 1], v[..., 0])
-    elevation = np.arctan2(v[..., 2], np.hypot(v[..., 0], v[..., 1]))
-    x = column_from_bearing(azimuth, width_px)
-    y = (height_px - 1) / 2.0 - elevation * height_px / np.pi
-    return x, y
+    xy = pixels_from_rays(Equirect(width_px, height_px), v).reshape(*v.shape[:-1], 2)
+    return xy[..., 0], xy[..., 1]
 
 
 def _check_photo(photo: np.ndarray) -> None:

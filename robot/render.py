@@ -1,16 +1,14 @@
 """A vectorised ray caster for cylindrical and equirectangular panoramas of a
 :class:`~robot.scene.Scene`.
 
-Camera model. A panorama is ``width_px`` columns for 360°. Column 0 looks along the robot heading
-and columns increase clockwise, so the pixel centre at OpenCV x coordinate ``x`` has robot-frame
-azimuth ``-2*pi*x/W`` (REP-103: counter-clockwise positive; :mod:`homing.bearings` converts
-columns and bearings). Rows (pixel centres at integers, 0 at the top) depend on the projection:
-
-- ``cylinder``: row ``y`` has elevation ``atan((cy - y) / f)`` with ``cy = (H - 1) / 2``, where
-  ``f`` is the cylinder focal length in pixels: ``W / (2*pi)`` (square pixels) unless a vertical
-  field of view is given, in which case ``f = (H / 2) / tan(vfov / 2)``.
-- ``equirect``: 360° x 180°, ``W = 2H``; row ``y`` has elevation ``pi * ((H - 1) / 2 - y) / H``
-  (row 0 just below the zenith).
+Camera model: the one of :mod:`homing.cameras` (the localizer reads the same pixels with the
+same model). A panorama is ``width_px`` columns for 360°; column 0 looks along the robot
+heading and columns increase clockwise, so the pixel centre at OpenCV x coordinate ``x`` has
+robot-frame azimuth ``-2*pi*x/W`` (REP-103: counter-clockwise positive). Rows (pixel centres at
+integers, 0 at the top) follow the model: a :class:`~homing.cameras.Cylinder` (focal length
+``W / (2*pi)``, square pixels, unless a vertical field of view is given) or an
+:class:`~homing.cameras.Equirect` sphere (``W = 2H``). :class:`PanoramaCamera` is that model
+mounted ``height_m`` above the floor.
 
 Ray casting. A ray has horizontal unit direction, so its parameter ``t`` is the horizontal
 distance in metres. Walls and box sides (vertical quads) are intersected per column, and only the
@@ -22,29 +20,32 @@ footprint.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import cv2
 import numpy as np
 
+from homing.bearings import bearing_rad_from_column
+from homing.cameras import CAMERA_MODELS, CameraModel, camera_model, focal_from_vfov_px
 from localizer.robot_protocol import Pose2D
 from robot.conditions import DEFAULT_CONDITION, Condition, apply_photometric
 from robot.scene import Scene
 
 Projection = Literal["cylinder", "equirect"]
-PROJECTIONS: tuple[Projection, ...] = ("cylinder", "equirect")
 
 
 @dataclass(frozen=True)
 class PanoramaCamera:
-    """A panorama camera ``height_m`` above the floor (see the module docstring for the models).
+    """A panorama camera ``height_m`` above the floor: the camera model (:attr:`model`, of
+    :mod:`homing.cameras`) the renderer draws with, and its mounting height.
 
-    ``projection`` is ``"cylinder"`` (the default) or ``"equirect"`` (then ``W`` must be ``2H``
-    and ``vfov_deg`` None). ``vfov_deg`` is the cylinder's vertical field of view from the top
-    edge to the bottom edge of the image; None gives square pixels (focal length ``W / (2*pi)``).
+    ``projection`` names the model, ``"cylinder"`` (the default) or ``"equirect"`` (then ``W``
+    must be ``2H`` and ``vfov_deg`` None). ``vfov_deg`` is the cylinder's vertical field of view
+    from the top edge to the bottom edge of the image; None gives square pixels (focal length
+    ``W / (2*pi)``).
     """
 
     width_px: int = 1024
@@ -62,8 +63,8 @@ class PanoramaCamera:
             raise ValueError(f"vfov_deg must be in (0, 180), got {self.vfov_deg}")
         if not self.height_m > 0:
             raise ValueError(f"height_m must be positive, got {self.height_m}")
-        if self.projection not in PROJECTIONS:
-            raise ValueError(f"projection must be one of {PROJECTIONS}, got {self.projection!r}")
+        if self.projection not in CAMERA_MODELS:
+            raise ValueError(f"projection must be one of {CAMERA_MODELS}, got {self.projection!r}")
         if self.projection == "equirect" and (
             self.width_px != 2 * self.height_px or self.vfov_deg is not None
         ):
@@ -72,38 +73,20 @@ class PanoramaCamera:
                 f"{self.width_px}x{self.height_px}, vfov_deg={self.vfov_deg}"
             )
 
-    @property
-    def focal_px(self) -> float:
-        """Vertical focal length of the cylinder in pixels (cylinder projection only)."""
-        if self.vfov_deg is None:
-            return self.width_px / (2.0 * math.pi)
-        return (self.height_px / 2.0) / math.tan(math.radians(self.vfov_deg) / 2.0)
-
-    @property
-    def pixel_rad(self) -> float:
-        """Angular size of a pixel at the horizon in radians (the larger of width and height)."""
-        if self.projection == "equirect":
-            return math.pi / self.height_px
-        return max(2.0 * math.pi / self.width_px, 1.0 / self.focal_px)
+    @cached_property
+    def model(self) -> CameraModel:
+        """The camera model of the rendered panoramas (:func:`homing.cameras.camera_model`)."""
+        focal = None if self.vfov_deg is None else focal_from_vfov_px(self.height_px, self.vfov_deg)
+        return camera_model(self.projection, self.width_px, self.height_px, focal)
 
     def azimuths_rad(self) -> np.ndarray:
-        """(W,) robot-frame azimuth of each column (0, then decreasing: clockwise)."""
-        return -2.0 * np.pi * np.arange(self.width_px) / self.width_px
-
-    def elevations_rad(self) -> np.ndarray:
-        """(H,) elevation of each row in radians, positive above the horizon."""
-        centre = (self.height_px - 1) / 2.0
-        rows = np.arange(self.height_px)
-        if self.projection == "equirect":
-            return np.pi * (centre - rows) / self.height_px
-        return np.arctan((centre - rows) / self.focal_px)
+        """(W,) robot-frame azimuth (rad, in (-pi, pi]) of each column: 0, then clockwise."""
+        return bearing_rad_from_column(np.arange(self.width_px), self.width_px)
 
     def tan_elevations(self) -> np.ndarray:
-        """(H,) tangent of the elevation of each row, positive above the horizon."""
-        if self.projection == "equirect":
-            return np.tan(self.elevations_rad())
-        centre = (self.height_px - 1) / 2.0
-        return (centre - np.arange(self.height_px)) / self.focal_px
+        """(H,) tangent of the elevation of each row (of :attr:`model`), positive above the
+        horizon."""
+        return self.model.tan_elevation(np.arange(self.height_px))
 
 
 @dataclass(frozen=True)
@@ -220,7 +203,7 @@ def shade_hits(scene: Scene, hits: RayHits, camera: PanoramaCamera) -> np.ndarra
     v_texel = np.einsum("ij,ij->i", rel, scene.v_axis[qv]) / scene.tile_m[qv, 1] * atlas.size_px
     secant = np.sqrt(1.0 + tan_el**2)  # ray length per metre of horizontal distance
     cos_incidence = np.abs(ray[np.arange(len(qv)), scene.axis[qv]]) / secant
-    footprint_m = t * secant * camera.pixel_rad / np.maximum(cos_incidence, 0.2)
+    footprint_m = t * secant * camera.model.pixel_rad / np.maximum(cos_incidence, 0.2)
     texel_m = scene.tile_m[qv].min(axis=1) / atlas.size_px
     level = np.floor(np.log2(np.maximum(footprint_m / texel_m, 1.0)) + 0.5).astype(np.int64)
     level = np.minimum(level, atlas.levels - 1)

@@ -41,14 +41,16 @@ def extract_panorama(
     equirectangular, an ``omni:...`` mirror image is unwrapped first); ``overrides`` are
     extraction parameters over the presets' (see :func:`map_overrides`).
 
-    Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file.
+    Raises ``localizer.panorama_io.PanoramaError`` (a ``ValueError``) naming a bad file, and
+    ``localizer.cameras.NotPanoramaError`` (a ``ValueError``) naming an image whose size is no
+    360° panorama's for ``camera``.
     """
     import cv2
 
     from localizer.panorama_io import read_panorama
 
     cv2.setNumThreads(1)  # one process per core already
-    return extract_image(read_panorama(path), presets, camera, overrides)
+    return extract_image(read_panorama(path), presets, camera, overrides, str(path))
 
 
 def extract_image(
@@ -56,15 +58,19 @@ def extract_image(
     presets: tuple[str, ...],
     camera: str = "auto",
     overrides: Mapping[str, Any] | None = None,
+    source: str = "image",
 ) -> list[Fingerprint]:
     """One fingerprint per preset of a decoded grey panorama ``image`` (what
     :func:`extract_panorama` does after reading the file; the map node's ``map/add`` calls it
-    with the image it received)."""
+    with the image it received); ``source`` names the image in errors."""
     from localizer.cameras import parse_camera
     from localizer.features import extract_with_camera
 
     spec = parse_camera(camera)
-    return [extract_with_camera(image, spec, preset, **(overrides or {})) for preset in presets]
+    return [
+        extract_with_camera(image, spec, preset, source=source, **(overrides or {}))
+        for preset in presets
+    ]
 
 
 def resolve_extractor(

@@ -9,17 +9,22 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from homing.bearings import bearing_rad_from_column
-from localizer.cameras import (
-    CameraSpec,
+from homing.cameras import (
     Cylinder,
     Equirect,
-    camera_of,
+    camera_model,
+    focal_from_vfov_px,
+    pixels_from_rays,
+    rays_from_pixels,
+)
+from localizer.cameras import (
+    CameraSpec,
+    NotPanoramaError,
     elevation_mask,
     horizon_band_mask,
     panorama_kind,
     parse_camera,
-    pixels_from_rays,
-    rays_from_pixels,
+    rows_kept,
     rows_mask,
 )
 from mapdb.records import Fingerprint
@@ -155,13 +160,76 @@ def test_auto_reads_a_two_to_one_image_as_a_sphere() -> None:
     assert panorama_kind(parse_camera("omni:5,5,1,4"), 2048, 1024) == "cylinder"  # unwrapped
 
 
-def test_a_fingerprint_keeps_its_camera() -> None:
+def test_a_fingerprint_carries_its_camera() -> None:
     old = Fingerprint.empty("sift", 1024, 192)  # made before cameras were recorded
-    assert camera_of(old) == Cylinder(1024, 192)
+    assert old.camera == Cylinder(1024, 192)
     sphere = Fingerprint.empty("sift", 1024, 512, params={"camera": "equirect"})
-    assert camera_of(sphere) == Equirect(1024, 512)
+    assert sphere.camera == Equirect(1024, 512)
     with pytest.raises(ValueError, match="unknown camera 'fisheye'"):
-        camera_of(Fingerprint.empty("sift", 10, 5, params={"camera": "fisheye"}))
+        Fingerprint.empty("sift", 10, 5, params={"camera": "fisheye"})
+
+
+def test_a_selection_keeps_the_fingerprints_camera_object() -> None:
+    fp = Fingerprint.empty("sift", 1024, 192)
+    assert fp.select(np.zeros(0, dtype=bool)).camera is fp.camera
+
+
+def test_the_factory_builds_each_model_and_refuses_others() -> None:
+    assert camera_model("cylinder", 512, 96, 60.0) == Cylinder(512, 96, 60.0)
+    assert camera_model("equirect", 512, 256) == Equirect(512, 256)
+    with pytest.raises(ValueError, match="unknown camera 'pinhole'"):
+        camera_model("pinhole", 640, 480)
+    with pytest.raises(ValueError, match="no focal_px"):
+        camera_model("equirect", 512, 256, focal_px=80.0)
+
+
+def test_a_vertical_field_of_view_sets_the_cylinder_focal_length() -> None:
+    cylinder = Cylinder(256, 64, focal_from_vfov_px(64, 60.0))
+    assert np.rad2deg(cylinder.elevation_rad(-0.5)) == pytest.approx(30.0)  # the top edge
+    assert np.rad2deg(cylinder.elevation_rad(63.5)) == pytest.approx(-30.0)  # the bottom edge
+    np.testing.assert_allclose(
+        cylinder.tan_elevation(np.arange(64)), np.tan(cylinder.elevation_rad(np.arange(64)))
+    )
+
+
+@pytest.mark.parametrize("size", [(1024, 192), (512, 96), (2048, 1024), (1000, 400)])
+def test_auto_takes_every_panorama_size_toploc_makes(size: tuple[int, int]) -> None:
+    assert panorama_kind(CameraSpec(), *size) in ("cylinder", "equirect")
+
+
+@pytest.mark.parametrize("size", [(640, 480), (1920, 1080), (1000, 1000), (4000, 1800)])
+def test_auto_refuses_an_image_that_is_no_360_panorama(size: tuple[int, int]) -> None:
+    with pytest.raises(NotPanoramaError, match=r"photo.jpg: \d+x\d+ px .* --camera"):
+        panorama_kind(CameraSpec(), *size, source="photo.jpg")
+
+
+def test_the_refusal_says_what_a_panorama_looks_like_and_how_to_name_the_camera() -> None:
+    with pytest.raises(NotPanoramaError) as refused:
+        panorama_kind(CameraSpec(), 640, 480, source="photo.jpg")
+    assert str(refused.value) == (
+        "photo.jpg: 640x480 px (1.33:1) is not a 360° panorama: an equirectangular one is 2:1 "
+        "(e.g. 2048x1024), a cylindrical one at least 2.5:1 (e.g. 1024x192); if it is one, "
+        "name its camera with --camera equirect or --camera cylinder"
+    )
+
+
+def test_a_named_camera_is_taken_at_its_word() -> None:
+    assert panorama_kind(CameraSpec("cylinder"), 640, 480) == "cylinder"
+    assert panorama_kind(CameraSpec("equirect"), 640, 480) == "equirect"
+    assert panorama_kind(parse_camera("omni:320,240,20,200"), 640, 480) == "cylinder"
+
+
+def test_all_row_filters_at_once_are_each_filter_in_turn() -> None:
+    sphere = Equirect(360, 180)
+    rows = np.arange(180)
+    both = rows_kept(rows, sphere, 30.0, -20.0, 60.0, "lower")
+    one_by_one = (
+        horizon_band_mask(rows, sphere, 30.0)
+        & elevation_mask(rows, sphere, -20.0, 60.0)
+        & rows_mask(rows, sphere, "lower")
+    )
+    np.testing.assert_array_equal(both, one_by_one)
+    assert 0 < both.sum() < 180
 
 
 def test_elevation_mask_leaves_out_nadir_and_zenith() -> None:

@@ -44,6 +44,19 @@ def test_localize_names_a_corrupt_image(building_map, tmp_path):
     assert "bad.png" in result.output
 
 
+def test_localize_refuses_a_pinhole_crop_naming_it(building_map, tmp_path):
+    import cv2
+
+    panorama = cv2.imread(str(building_map[1] / "images" / "kitchen_003.png"))
+    crop = tmp_path / "crop.png"
+    cv2.imwrite(str(crop), panorama[:, 100:228])  # 128 x 96: a pinhole's field, 4:3
+    result = run("localize", crop, "--db", building_map[0])
+    assert result.exit_code == 1
+    assert f"{crop}: 128x96 px (1.33:1) is not a 360° panorama" in result.output
+    named = run("localize", crop, "--db", building_map[0], "--camera", "cylinder")
+    assert named.exit_code == 0, named.output
+
+
 def test_localize_names_a_missing_map(building_map, tmp_path):
     image = building_map[1] / "images" / "kitchen_000.png"
     result = run("localize", image, "--db", tmp_path / "nowhere.db")

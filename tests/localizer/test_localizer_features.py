@@ -7,7 +7,8 @@ import pytest
 from localizer_images import make_textured_panorama
 
 from homing.bearings import wrap_angle_rad
-from localizer.cameras import CameraSpec, Cylinder, Equirect, parse_camera
+from homing.cameras import Cylinder, Equirect
+from localizer.cameras import CameraSpec, parse_camera
 from localizer.features import (
     ExtractionParams,
     extract,

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from homing.bearings import wrap_angle_rad
-from localizer.cameras import Cylinder, rays_from_angles
+from homing.cameras import Cylinder, rays_from_angles
 from localizer.rays import rays_from_fingerprint
 from localizer.verification import (
     Verification,
@@ -204,8 +204,10 @@ def test_rays_from_fingerprint_geometry() -> None:
     assert rays[2, 2] == pytest.approx(np.sin(np.arctan(20.0 / f)))  # top row looks up
     assert rays[3, 2] == pytest.approx(-np.sin(np.arctan(20.0 / f)))
     assert rays_from_fingerprint(Fingerprint.empty("sift", w, h)).shape == (0, 3)
-    with pytest.raises(ValueError, match="cylinder is 100x41"):
-        rays_from_fingerprint(fp, Cylinder(100, 41))
+    with pytest.raises(ValueError, match="cylinder camera is 100x41"):
+        Fingerprint(
+            "sift", w, h, xy, fp.bearings_rad, fp.descriptors, camera_model=Cylinder(100, 41)
+        )
     np.testing.assert_allclose(rays_from_angles([np.pi / 2], [0.0]), [[0.0, 1.0, 0.0]], atol=1e-12)
 
 

@@ -268,3 +268,46 @@ def test_info_names_the_rooms_with_one_place(filled_map: MapDatabase, db_path: P
     text = run("info", "--db", db_path).stdout
     (hint,) = [line for line in text.splitlines() if "one place only" in line]
     assert "hall" in hint and "kitchen" not in hint  # the kitchen has two places
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_add_refuses_a_four_by_three_photo_naming_it(tmp_path: Path, db_path: Path) -> None:
+    photo = write_image(tmp_path / "photo.png", 1, size_px=(640, 480))
+    result = run("add", photo, "--db", db_path, "--room", "lab", "--no-calibrate")
+    assert result.exit_code == 1
+    assert f"{photo}: 640x480 px (1.33:1) is not a 360° panorama" in result.output
+    assert "--camera equirect or --camera cylinder" in result.output
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert map_db.places() == []
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_add_takes_a_photo_whose_camera_is_named(tmp_path: Path, db_path: Path) -> None:
+    photo = write_image(tmp_path / "photo.png", 1, size_px=(640, 480))
+    result = run(
+        "add", photo, "--db", db_path, "--room", "lab", "--camera", "cylinder", "--no-calibrate"
+    )
+    assert result.exit_code == 0, result.output
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert map_db.stored_params()["camera"] == "cylinder"
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_add_takes_a_two_to_one_image_as_a_sphere(tmp_path: Path, db_path: Path) -> None:
+    sphere = write_image(tmp_path / "sphere.png", 1, size_px=(1024, 512))
+    result = run("add", sphere, "--db", db_path, "--room", "lab", "--no-calibrate")
+    assert result.exit_code == 0, result.output
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert map_db.stored_params()["camera"] == "equirect"
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_build_fails_a_four_by_three_photo_and_adds_the_panoramas(tmp_path, db_path) -> None:
+    photos = tmp_path / "photos"
+    write_image(photos / "lab" / "sphere.png", 1, size_px=(1024, 512))
+    write_image(photos / "lab" / "cylinder.png", 2, size_px=(512, 96))
+    write_image(photos / "lab" / "photo.png", 3, size_px=(640, 480))
+    result = build(photos, db_path, "--workers", "0", "--no-calibrate", "--detector", "sift")
+    assert result.exit_code == 1
+    assert "added 2, skipped 0, failed 1" in result.stdout
+    assert "photo.png: 640x480 px (1.33:1) is not a 360° panorama" in result.stderr

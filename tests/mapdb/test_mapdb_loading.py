@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -126,7 +128,7 @@ def test_integral_descriptors_are_stored_as_bytes_and_load_back_equal(
     map_db: MapDatabase, rng: np.random.Generator
 ) -> None:
     sift = make_fingerprint(rng, "sift", 9)
-    integral = type(sift)(**{**sift.__dict__, "descriptors": np.rint(sift.descriptors * 255)})
+    integral = replace(sift, descriptors=np.rint(sift.descriptors * 255))
     assert fingerprint_to_row(integral)["descriptor_dtype"] == "u1"
     assert len(fingerprint_to_row(integral)["descriptors"]) == 9 * 128
     assert fingerprint_to_row(sift)["descriptor_dtype"] == "f4"

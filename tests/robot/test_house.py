@@ -105,7 +105,7 @@ def test_equirect_landmark_column_and_row() -> None:
     elevation = math.atan2(dz, math.hypot(dx, dy))
     assert cols.mean() == pytest.approx((-512 * bearing / (2 * math.pi)) % 512, abs=1.0)
     assert rows.mean() == pytest.approx(255 / 2 - elevation * 256 / math.pi, abs=1.0)
-    elevations = camera.elevations_rad()
+    elevations = camera.model.elevation_rad(np.arange(camera.height_px))
     assert elevations[0] == pytest.approx(math.pi / 2 - math.pi / 512)
     with pytest.raises(ValueError, match="W = 2H"):
         PanoramaCamera(512, 192, projection="equirect")

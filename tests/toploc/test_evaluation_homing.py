@@ -275,7 +275,7 @@ def equirect_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_equirect_images_are_read_as_spheres(equirect_dataset: Path) -> None:
     """A 2:1 image is extracted on the equirectangular model (its elevation limits and band are
     elevations of the sphere, not of a cylinder), unless ``--camera cylinder`` says otherwise."""
-    from localizer.cameras import Equirect
+    from homing.cameras import Equirect
 
     places = load_places(equirect_dataset)
     auto = extract_fingerprints([places[0].path], FeatureSettings("sift"))[0]

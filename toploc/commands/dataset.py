@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, cast
 
 import click
 
+from homing.cameras import CAMERA_MODELS
 from robot.conditions import CONDITIONS
 from robot.worlds import WORLD_NAMES
 
@@ -15,7 +16,6 @@ if TYPE_CHECKING:
     from robot.render import PanoramaCamera, Projection
 
 PHOTOS = "photos"
-PROJECTIONS = ("cylinder", "equirect")  # robot.render.PROJECTIONS, without importing OpenCV here
 
 
 @click.group("dataset")
@@ -68,7 +68,7 @@ def dataset() -> None:
 @click.option("--random-heading", is_flag=True, help="Seeded random headings instead.")
 @click.option(
     "--projection",
-    type=click.Choice(PROJECTIONS),
+    type=click.Choice(CAMERA_MODELS),
     default=None,
     help="Panorama projection [default: cylinder; photos equirect].",
 )

@@ -87,7 +87,7 @@ def localize(
     with localizer_errors():
         panorama = read_panorama(image)
         localizer = load_localizer(db_path, detector, index, camera)
-        belief, observation = localizer.localize_once(panorama)
+        belief, observation = localizer.localize_once(panorama, str(image))
     if as_json:
         report = belief.to_json() | {"timing_ms": dict(observation.timing_ms)}
         click.echo(json.dumps(report, indent=2))
