@@ -22,7 +22,7 @@ from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
 from toploc import bus
-from toploc.bus_config import bus_config, client_bus_config
+from toploc.bus.config import bus_config, client_bus_config
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient, LocalizerNode
 from toploc.nodes.robot import RemoteRobot, RobotNode

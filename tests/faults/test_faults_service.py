@@ -24,10 +24,11 @@ from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
 from toploc import bus
+from toploc.bus.png_codec import decode_png
 from toploc.limits import Limits, RateLimit, load_limits
 from toploc.nodes.localizer import LocalizerClient, LocalizerNode
 from toploc.nodes.mapdb import MapNode
-from toploc.nodes.robot import RemoteRobot, RobotNode, decode_png
+from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.runner import LocalizationDroppedError, LocalizationRunner
 
 

@@ -17,8 +17,9 @@ from click.testing import CliRunner
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from robot.camera_sources import open_source
 from toploc import bus
+from toploc.bus.png_codec import decode_png
 from toploc.cli import main
-from toploc.nodes.robot import RemoteRobot, RobotNode, decode_png
+from toploc.nodes.robot import RemoteRobot, RobotNode
 
 
 class Base:

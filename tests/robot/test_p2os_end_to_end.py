@@ -35,9 +35,10 @@ from robot.p2os_sim import P2osSimulator
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import make_world
 from toploc import bus
+from toploc.bus.schemas import MOVE, TRUE_POSE
+from toploc.bus.session import open_when_up
 from toploc.nodes.localizer import LocalizerClient
-from toploc.nodes.robot import MOVE_FIELDS
-from toploc.nodes.sim_truth import TRUE_POSE_FIELDS, SimTruthNode, open_when_up
+from toploc.nodes.sim_truth import SimTruthNode
 
 REPO = Path(__file__).resolve().parents[2]
 README = REPO / "README.md"
@@ -176,12 +177,12 @@ def _record_map(session: zenoh.Session, robot_id: str, bus_args: tuple[str, ...]
     for i, (room, connect_to) in enumerate(ROUTE):
         if i:  # carried to the next room
             carry = bus.encode("kidnap", {"room": room})
-            bus.request_json(session, bus.key(robot_id, bus.SIM_KIDNAP), TRUE_POSE_FIELDS, carry)
+            bus.request_json(session, bus.key(robot_id, bus.SIM_KIDNAP), TRUE_POSE.fields, carry)
         for k in range(PLACES_PER_ROOM):
             if k:
                 cmd = bus.encode("cmd", {"turn_deg": 110.0, "forward_m": 0.6})
                 moved = bus.request_json(
-                    session, bus.key(robot_id, bus.BASE_CMD), MOVE_FIELDS, cmd, timeout_s=30.0
+                    session, bus.key(robot_id, bus.BASE_CMD), MOVE.fields, cmd, timeout_s=30.0
                 )
                 assert math.isfinite(moved["moved_m"])
             extra = ("--connect-room", connect_to) if connect_to and not k else ()

@@ -109,7 +109,7 @@ def test_field_types_follow_json():
 
 
 def test_an_error_reply_may_say_when_to_ask_again():
-    from toploc.bus import _error_reply
+    from toploc.bus.request_reply import _error_reply
 
     assert _error_reply("k", bus.error_payload("busy", 0.25)) == ("busy", 0.25)
     assert _error_reply("k", bus.error_payload("bumper pressed")) == ("bumper pressed", None)

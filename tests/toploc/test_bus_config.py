@@ -6,7 +6,7 @@ import json
 import pytest
 
 from toploc import bus
-from toploc.bus_config import (
+from toploc.bus.config import (
     bus_config,
     client_bus_config,
     endpoint_host,

@@ -16,10 +16,11 @@ from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
 from toploc import bus
+from toploc.bus.png_codec import decode_png
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient, LocalizerNode
 from toploc.nodes.mapdb import MapNode
-from toploc.nodes.robot import RemoteRobot, RobotNode, decode_png
+from toploc.nodes.robot import RemoteRobot, RobotNode
 
 # --- robot -----------------------------------------------------------------------------------
 

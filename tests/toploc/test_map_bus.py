@@ -22,9 +22,9 @@ from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
 from toploc import bus
 from toploc.bus import BusConfig, open_session
+from toploc.bus.png_codec import encode_png
 from toploc.limits import Limits
 from toploc.nodes import mapdb as mapdb_node
-from toploc.nodes.camera import encode_png
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient
 from toploc.service import Service, start_service

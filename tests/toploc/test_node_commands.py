@@ -21,7 +21,7 @@ import pytest
 from bus_helpers import free_port
 
 from toploc import bus
-from toploc.nodes.camera import encode_png
+from toploc.bus.png_codec import encode_png
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient
 from toploc.nodes.robot import RemoteRobot, RobotNode

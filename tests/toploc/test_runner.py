@@ -19,8 +19,9 @@ from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
+from toploc.bus.messages import check_belief
 from toploc.cli import main
-from toploc.nodes.localizer import LocalizerClient, check_belief
+from toploc.nodes.localizer import LocalizerClient
 from toploc.runner import LocalizationRunner, NoPlacesYetError
 from toploc.service import start_service
 

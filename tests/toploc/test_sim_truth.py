@@ -14,13 +14,9 @@ from robot.p2os_sim import P2osSimulator
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import make_world
 from toploc import bus
-from toploc.nodes.sim_truth import (
-    TRUE_POSE_FIELDS,
-    SimTruthNode,
-    TruePose,
-    open_when_up,
-    subscribe_true_pose,
-)
+from toploc.bus.schemas import TRUE_POSE
+from toploc.bus.session import open_when_up
+from toploc.nodes.sim_truth import SimTruthNode, TruePose, subscribe_true_pose
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +69,7 @@ def test_the_pose_crosses_the_bus_and_a_kidnap_moves_the_base(zbus, simulator) -
         assert math.isclose(pose().x_m, simulator.true_pose.x_m)
         key = bus.key(ROBOT_ID, bus.SIM_KIDNAP)
         request = bus.encode("kidnap", {"room": "office_b"})
-        moved = bus.request_json(zbus.client, key, TRUE_POSE_FIELDS, request)
+        moved = bus.request_json(zbus.client, key, TRUE_POSE.fields, request)
         assert moved["room"] == "office_b" and moved["world"] == "building"
         true = simulator.true_pose
         room = simulator.world.room_at(true.x_m, true.y_m)
@@ -81,7 +77,7 @@ def test_the_pose_crosses_the_bus_and_a_kidnap_moves_the_base(zbus, simulator) -
         assert wait_for(lambda: math.isclose(pose().x_m, moved["x_m"]), 2.0)
         with pytest.raises(bus.BusReplyError, match="room 'attic' is not in 'building'"):
             attic = bus.encode("kidnap", {"room": "attic"})
-            bus.request_json(zbus.client, key, TRUE_POSE_FIELDS, attic)
+            bus.request_json(zbus.client, key, TRUE_POSE.fields, attic)
     subscriber.undeclare()
 
 

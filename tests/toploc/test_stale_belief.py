@@ -16,7 +16,8 @@ from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
 from toploc.bus import BusConfig, open_session
-from toploc.nodes.localizer import LocalizerClient, check_belief, mark_stale
+from toploc.bus.messages import check_belief, mark_stale
+from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.robot import RobotNode
 from toploc.service import start_service
 

@@ -17,7 +17,7 @@ from typing import Any
 import click
 
 from toploc import bus
-from toploc.bus_config import client_bus_config
+from toploc.bus.config import client_bus_config
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 

@@ -18,7 +18,7 @@ from localizer.robot_protocol import Camera
 from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
-from toploc.bus_config import bus_config, exposure_warning
+from toploc.bus.config import bus_config, exposure_warning
 from toploc.limits import Limits, load_limits
 
 if TYPE_CHECKING:

@@ -25,7 +25,7 @@ import click
 from localizer.robot_protocol import Pose2D
 from mapdb.records import check_name
 from toploc import bus
-from toploc.bus_config import client_bus_config
+from toploc.bus.config import client_bus_config
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 if TYPE_CHECKING:
@@ -59,16 +59,17 @@ class Recorder:
     def odometry(self) -> Pose2D:
         """The robot's odometry now: a ``base/odom`` query (a base driven by hand may publish
         none while it moves)."""
-        from toploc.nodes.robot import ODOM_FIELDS, odometry_from_fields
+        from toploc.bus.messages import odometry_from_fields
+        from toploc.bus.schemas import ODOM
 
         key_expr = bus.key(self.robot.robot_id, bus.BASE_ODOM)
         session, timeout_s = self.robot.session, self.robot.timeout_s
-        message = bus.request_json(session, key_expr, ODOM_FIELDS, None, timeout_s)
+        message = bus.request_json(session, key_expr, ODOM.fields, None, timeout_s)
         return odometry_from_fields(message)
 
     def record(self) -> tuple[float, float]:
         """Capture, add, print one line; the odometry position ``(x_m, y_m)`` it was taken at."""
-        from toploc.nodes.camera import encode_png
+        from toploc.bus.png_codec import encode_png
 
         odometry = self.odometry()  # position and heading of one instant, just before capture
         capture = self.robot.capture()

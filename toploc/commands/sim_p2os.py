@@ -18,14 +18,15 @@ from robot.p2os_models import DEFAULT_MODEL, MODEL_FACTORS
 from robot.p2os_sim import P2osSimulator, SimFaults
 from robot.sim_robot import Obstacles, random_free_pose
 from robot.worlds import WORLD_NAMES, make_world
-from toploc.bus_config import client_bus_config
+from toploc.bus.config import client_bus_config
+from toploc.bus.session import open_when_up
 from toploc.commands.options import (
     robot_id_option,
     service_endpoint_option,
     stop_on_signals,
     zenoh_config_option,
 )
-from toploc.nodes.sim_truth import SimTruthNode, open_when_up
+from toploc.nodes.sim_truth import SimTruthNode
 
 FAULTS = ("garbage", "truncated", "checksum", "mute")
 

@@ -10,8 +10,8 @@ Keys under ``toploc/<robot_id>/``:
 
 - ``camera/capture`` (queryable, at most ``max_captures_per_s``): capture now; reply PNG bytes
   with the JSON attachment ``{schema, kind: "capture", capture_id, stamp, heading_deg,
-  source}``; the same sample is published on ``camera/panorama``. ``heading_deg`` is the
-  odometry heading at capture time.
+  source}`` (:data:`toploc.bus.schemas.CAPTURE`); the same sample is published on
+  ``camera/panorama``. ``heading_deg`` is the odometry heading at capture time.
 - liveliness token ``alive/camera`` (also while a robot node serves its camera): one node per
   robot id serves the capture keys; a second one, or a robot node that would serve its camera
   while a camera node runs, refuses to start (run that robot node with ``--no-camera``).
@@ -24,30 +24,20 @@ import itertools
 import math
 import threading
 from collections.abc import Callable
-from typing import Any
 
-import cv2
-import numpy as np
 import zenoh
 
 from localizer.robot_protocol import Camera
 from toploc import bus
+from toploc.bus.clients.robot import RemoteRobot
+from toploc.bus.png_codec import encode_png
+from toploc.bus.schemas import CAPTURE
 from toploc.limits import Limits, RateLimit
 from toploc.nodes.node import Node
 
 NODE_NAME = "camera"
 BUS_HEADING_TIMEOUT_S = 0.5
 """How long a camera node alone waits for the robot node's ``base/odom`` per capture."""
-
-
-def encode_png(image: np.ndarray) -> bytes:
-    """Lossless PNG bytes of a uint8 grey (H x W) or BGR (H x W x 3) image."""
-    if image.dtype != np.uint8 or image.ndim not in (2, 3):
-        raise ValueError(f"panorama must be uint8 HxW or HxWx3, got {image.dtype} {image.shape}")
-    ok, buffer = cv2.imencode(".png", image)
-    if not ok:
-        raise ValueError(f"OpenCV could not encode a {image.shape} image as PNG")
-    return buffer.tobytes()
 
 
 class CameraNode(Node):
@@ -68,7 +58,7 @@ class CameraNode(Node):
         super().__init__(session, robot_id, NODE_NAME)
         self.camera = camera
         self.limits = limits or Limits()
-        self._remote: Any = None
+        self._remote: RemoteRobot | None = None
         if heading_deg is None:
             heading_deg = self._bus_heading
         self.heading_deg = heading_deg
@@ -90,8 +80,6 @@ class CameraNode(Node):
 
     def _bus_heading(self) -> float:
         """The newest heading of the bus's robot node (``base/odom``), 0 if none answers."""
-        from toploc.nodes.robot import RemoteRobot  # robot.py composes this module
-
         if self._remote is None:
             self._remote = RemoteRobot(self.session, self.robot_id, BUS_HEADING_TIMEOUT_S)
         with contextlib.suppress(bus.BusError):
@@ -113,6 +101,6 @@ class CameraNode(Node):
             "heading_deg": heading_deg,
             "source": capture.source,
         }
-        reply = bus.Reply(encode_png(capture.image), bus.encode("capture", meta))
+        reply = bus.Reply(encode_png(capture.image), CAPTURE.encode(meta))
         self._panorama.put(reply.payload, attachment=reply.attachment)
         return reply

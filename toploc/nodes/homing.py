@@ -1,5 +1,6 @@
 """Visual homing on the Zenoh bus: :class:`HomingService` drives the service's robot to a stored
-place (no Zenoh in it), :class:`HomingNode` serves it, :class:`HomingClient` talks to it.
+place (no Zenoh in it), :class:`HomingNode` serves it,
+:class:`~toploc.bus.clients.homing.HomingClient` (also importable from here) talks to it.
 
 Keys under ``toploc/<robot_id>/``:
 
@@ -46,7 +47,6 @@ access control) that the localization's own drive would depend on.
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,23 +59,28 @@ from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import HomingParams, HomingProgress, HomingResult, drive_home
 from mapdb.records import Fingerprint
 from toploc import bus
+from toploc.bus import schemas
+from toploc.bus.clients.homing import GOAL_TIMEOUT_S, HomingClient
+from toploc.bus.messages import progress_defaults, progress_message, result_message
 from toploc.limits import Limits
-from toploc.nodes.node import Client, Node
+from toploc.nodes.node import Node
 from toploc.runner import LocalizationRunner
+
+__all__ = [
+    "GOAL_TIMEOUT_S",
+    "NODE_NAME",
+    "TIMEOUT",
+    "HomingBusyError",
+    "HomingClient",
+    "HomingNode",
+    "HomingService",
+]
 
 T = TypeVar("T")
 
 NODE_NAME = "homing"
 TIMEOUT = "timeout"
-GOAL_TIMEOUT_S = 600.0
 _log = logging.getLogger(__name__)
-RESULT_FIELDS: dict[str, bus.FieldType] = {
-    "place_id": int,
-    "arrived": bool,
-    "reason": str,
-    "steps": int,
-    "distance_m": float,
-}
 
 
 class HomingBusyError(RuntimeError):
@@ -145,22 +150,6 @@ class _DriveRobot:
 
     def stop(self) -> None:
         self.robot.stop()
-
-
-def progress_message(place_id: int, progress: HomingProgress) -> dict[str, Any]:
-    """The ``homing/progress`` fields for one capture (see the module docstring)."""
-    home = progress.home
-    parallax = None if home is None or math.isnan(home.parallax_rad) else home.parallax_rad
-    return {
-        "place_id": place_id,
-        "step": progress.steps,
-        "features": progress.view.n,
-        "matched": 0 if home is None else home.n_used,
-        "home_length": None if home is None else home.length,
-        "parallax_deg": None if parallax is None else math.degrees(parallax),
-        "moved_m": progress.distance_m,
-        "state": "lost" if home is None else "homing",
-    }
 
 
 class HomingService:
@@ -281,31 +270,6 @@ class HomingService:
                 self._drive = None
 
 
-def progress_defaults(place_id: int) -> dict[str, Any]:
-    """A ``homing/progress`` message before any capture."""
-    return {
-        "place_id": place_id,
-        "step": 0,
-        "features": 0,
-        "matched": 0,
-        "home_length": None,
-        "parallax_deg": None,
-        "moved_m": 0.0,
-        "state": "homing",
-    }
-
-
-def result_message(place_id: int, result: HomingResult) -> dict[str, Any]:
-    """The ``homing/goal`` reply fields."""
-    return {
-        "place_id": place_id,
-        "arrived": result.arrived,
-        "reason": result.reason,
-        "steps": result.steps,
-        "distance_m": result.distance_m,
-    }
-
-
 class HomingNode(Node):
     """Serve ``service`` on the bus under ``toploc/<robot_id>/`` within ``limits``; ``close()``
     (or ``with``)."""
@@ -331,7 +295,7 @@ class HomingNode(Node):
     def publish(self, progress: dict[str, Any]) -> None:
         """Publish one ``homing/progress`` message (a failure is logged: the drive goes on)."""
         try:
-            self._publisher.put(bus.encode("progress", progress))
+            self._publisher.put(schemas.PROGRESS.encode(progress))
         except (ValueError, zenoh.ZError) as error:
             _log.warning("could not publish homing progress: %s", error)
 
@@ -343,8 +307,8 @@ class HomingNode(Node):
 
     def _on_goal(self, payload: bytes | None) -> bus.Reply:
         where = self.key(bus.HOMING_GOAL)
-        request = self._decode(bus.HOMING_GOAL, payload, "goal")
-        bus.check_fields(where, request, {"place_id": int})
+        request = self._decode(bus.HOMING_GOAL, payload, schemas.GOAL.kind)
+        bus.check_fields(where, request, schemas.GOAL.fields)
         timeout_s = request.get("timeout_s")
         if timeout_s is not None and (not bus.has_type(timeout_s, float) or timeout_s <= 0):
             raise bus.BusMessageError(f"{where}: timeout_s must be a number > 0, got {timeout_s!r}")
@@ -353,45 +317,9 @@ class HomingNode(Node):
             result = self.service.goal(place_id, timeout_s)
         except ValueError as error:
             raise bus.BusMessageError(f"{where}: {error}") from None
-        return bus.Reply(bus.encode("homing", result_message(place_id, result)))
+        return bus.Reply(schemas.HOMING_RESULT.encode(result_message(place_id, result)))
 
     def _on_cancel(self, payload: bytes | None) -> bus.Reply:
         if payload:
-            self._decode(bus.HOMING_CANCEL, payload, "cancel")
-        return bus.Reply(bus.encode("cancelled", {"cancelled": self.service.cancel()}))
-
-
-class HomingClient(Client):
-    """Send goals to, cancel and follow the :class:`HomingNode` of robot ``robot_id``."""
-
-    def goal(self, place_id: int, timeout_s: float = GOAL_TIMEOUT_S) -> dict[str, Any]:
-        """Drive to ``place_id``; the node gives up after ``timeout_s`` (reason ``timeout``),
-        this call waits a little longer for its reply."""
-        payload = bus.encode("goal", {"place_id": place_id, "timeout_s": timeout_s})
-        return bus.request_json(
-            self.session,
-            self.key(bus.HOMING_GOAL),
-            RESULT_FIELDS,
-            payload,
-            timeout_s + self.timeout_s,
-        )
-
-    def cancel(self) -> bool:
-        """Cancel the running drive; whether one was running."""
-        reply = bus.request_json(
-            self.session,
-            self.key(bus.HOMING_CANCEL),
-            {"cancelled": bool},
-            bus.encode("cancel", {}),
-            self.timeout_s,
-        )
-        return bool(reply["cancelled"])
-
-    def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
-        """Call ``callback(progress)`` for each ``homing/progress`` message (on a zenoh
-        thread); malformed ones are skipped. :meth:`close` undeclares."""
-        return self._subscribe(
-            bus.HOMING_PROGRESS,
-            lambda key_expr, data: bus.decode(key_expr, data, {"place_id": int}),
-            callback,
-        )
+            self._decode(bus.HOMING_CANCEL, payload, schemas.CANCEL.kind)
+        return bus.Reply(schemas.CANCELLED.encode({"cancelled": self.service.cancel()}))

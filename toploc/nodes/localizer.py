@@ -1,5 +1,6 @@
 """The localizer on the Zenoh bus: :class:`LocalizerNode` serves a :class:`LocalizationService`,
-:class:`LocalizerClient` is what an application uses to talk to it.
+:class:`~toploc.bus.clients.localizer.LocalizerClient` (also importable from here) is what an
+application uses to talk to it.
 
 Keys under ``toploc/<robot_id>/``:
 
@@ -21,8 +22,8 @@ seen the robot and the token goes (the robot node stopped, crashed or lost its l
 belief it answers or publishes carries ``"stale": true`` and ``"age_s"`` (seconds since the
 belief's ``stamp``; the last belief is still served, nothing updates it), and the stale belief
 is published at once; when the token comes back a fresh (unmarked) belief is published. Both
-fields are optional: :func:`check_belief` keeps them, and a reader that does not know them
-(``RoomBelief.from_json``) ignores them.
+fields are optional: :func:`~toploc.bus.messages.check_belief` keeps them, and a reader that does
+not know them (``RoomBelief.from_json``) ignores them.
 
 Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
 indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
@@ -37,22 +38,31 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 import zenoh
 
-from localizer.belief import RoomBelief
 from toploc import bus
+from toploc.bus.clients.localizer import LOCALIZE_TIMEOUT_S, LocalizerClient
+from toploc.bus.messages import check_belief, check_prior, mark_stale
+from toploc.bus.schemas import LOCALIZE, RESET
 from toploc.limits import Limits
-from toploc.nodes.node import Client, Node
+from toploc.nodes.node import Node
 from toploc.runner import NoPlacesYetError
+
+__all__ = [
+    "LOCALIZE_TIMEOUT_S",
+    "NODE_NAME",
+    "ROBOT_NODE",
+    "LocalizationService",
+    "LocalizerClient",
+    "LocalizerNode",
+]
 
 NODE_NAME = "localizer"
 _log = logging.getLogger(__name__)
-LOCALIZE_TIMEOUT_S = 300.0
 ROBOT_NODE = "robot"
-STALE_FIELDS: dict[str, bus.FieldType] = {"stale": bool, "age_s": (float, type(None))}
 
 
 class LocalizationService(Protocol):
@@ -70,44 +80,6 @@ class LocalizationService(Protocol):
     def reset(self, prior: Mapping[str, float] | None) -> dict:
         """Uniform belief over the rooms (``prior`` None) or the given prior; the belief."""
         ...
-
-
-def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
-    """The belief message (``RoomBelief.to_json()``) ``belief`` stands for, checked field by
-    field, with the optional ``stale`` (bool) and ``age_s`` (a number >= 0, or null) kept;
-    :class:`~toploc.bus.BusMessageError` prefixed ``where`` naming the bad field."""
-    try:
-        checked = RoomBelief.from_json(belief).to_json()
-    except ValueError as error:
-        raise bus.BusMessageError(f"{where}: {error}") from None
-    optional = {k: t for k, t in STALE_FIELDS.items() if k in belief}
-    bus.check_fields(where, belief, optional)
-    if belief.get("age_s") is not None and belief["age_s"] < 0:
-        raise bus.BusMessageError(f"{where}: field 'age_s' must be >= 0, got {belief['age_s']!r}")
-    return {**checked, **{k: belief[k] for k in optional}}
-
-
-def mark_stale(belief: Mapping[str, Any], now_s: float | None = None) -> dict[str, Any]:
-    """``belief`` with ``"stale": true`` and ``"age_s"``: seconds since its ``stamp`` (``now_s``,
-    default ``time.time()``), null without a stamp."""
-    stamp = belief.get("stamp")
-    now = time.time() if now_s is None else now_s
-    age_s = None if stamp is None else max(0.0, now - stamp)
-    return {**belief, "stale": True, "age_s": age_s}
-
-
-def check_prior(where: str, prior: Any) -> dict[str, float] | None:
-    """``None`` or a ``{room: weight}`` dict of finite non-negative numbers; else raise."""
-    if prior is None:
-        return None
-    if not isinstance(prior, dict) or not prior:
-        raise bus.BusMessageError(
-            f"{where}: prior must be a non-empty object {{room: p}}, got {prior!r}"
-        )
-    for room, p in prior.items():
-        if not bus.has_type(p, float) or p < 0:
-            raise bus.BusMessageError(f"{where}: prior[{room!r}] must be a number >= 0, got {p!r}")
-    return {room: float(p) for room, p in prior.items()}
 
 
 class LocalizerNode(Node):
@@ -205,9 +177,8 @@ class LocalizerNode(Node):
         active, deadline_s = False, None
         if payload:
             where = self.key(bus.LOCALIZER_LOCALIZE)
-            request = self._decode_request(bus.LOCALIZER_LOCALIZE, payload, "localize")
-            optional = {"active": bool, "timeout_s": float}
-            bus.check_fields(where, request, {k: t for k, t in optional.items() if k in request})
+            request = self._decode_request(bus.LOCALIZER_LOCALIZE, payload, LOCALIZE.kind)
+            LOCALIZE.check_optional(where, request)
             active = request.get("active", False)
             if "timeout_s" in request:
                 deadline_s = received_s + request["timeout_s"]
@@ -218,53 +189,6 @@ class LocalizerNode(Node):
         if payload:
             where = self.key(bus.LOCALIZER_RESET)
             prior = check_prior(
-                where, self._decode_request(bus.LOCALIZER_RESET, payload, "reset").get("prior")
+                where, self._decode_request(bus.LOCALIZER_RESET, payload, RESET.kind).get("prior")
             )
         return self._belief_reply(self.service.reset(prior), publish=True)
-
-
-class LocalizerClient(Client):
-    """Query and follow a :class:`LocalizerNode` of robot ``robot_id`` over ``session``.
-
-    Every call raises :class:`~toploc.bus.BusTimeout` if no node answers in time,
-    :class:`~toploc.bus.BusReplyError` with the node's message if the service failed.
-    """
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        robot_id: str,
-        timeout_s: float = bus.DEFAULT_TIMEOUT_S,
-        localize_timeout_s: float = LOCALIZE_TIMEOUT_S,
-    ) -> None:
-        super().__init__(session, robot_id, timeout_s)
-        self.localize_timeout_s = localize_timeout_s
-
-    def _query(self, suffix: str, payload: bytes | None, timeout_s: float) -> dict[str, Any]:
-        key_expr = self.key(suffix)
-        message = bus.request_json(self.session, key_expr, {}, payload, timeout_s)
-        return check_belief(key_expr, message)
-
-    def belief(self) -> dict[str, Any]:
-        """The node's latest belief."""
-        return self._query(bus.LOCALIZER_BELIEF, None, self.timeout_s)
-
-    def localize(self, active: bool = False) -> dict[str, Any]:
-        """Localize now (moving to disambiguate if ``active``); waits up to
-        ``localize_timeout_s`` for the new belief."""
-        payload = bus.encode("localize", {"active": active, "timeout_s": self.localize_timeout_s})
-        return self._query(bus.LOCALIZER_LOCALIZE, payload, self.localize_timeout_s)
-
-    def reset(self, prior: Mapping[str, float] | None = None) -> dict[str, Any]:
-        """Reset to a uniform belief, or to ``prior`` ({room: p})."""
-        payload = bus.encode("reset", {} if prior is None else {"prior": dict(prior)})
-        return self._query(bus.LOCALIZER_RESET, payload, self.timeout_s)
-
-    def subscribe(self, callback: Callable[[dict[str, Any]], None]) -> zenoh.Subscriber:
-        """Call ``callback(belief)`` for each published belief (on a zenoh thread); malformed
-        publications are skipped. Undeclare the returned subscriber, or :meth:`close`."""
-        return self._subscribe(
-            bus.LOCALIZER_BELIEF,
-            lambda key_expr, data: check_belief(key_expr, bus.decode(key_expr, data)),
-            callback,
-        )

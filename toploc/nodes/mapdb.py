@@ -1,6 +1,7 @@
 """The map on the Zenoh bus: :class:`MapNode` answers ``map/rooms``, ``map/places``,
 ``map/edges``, ``map/add`` and ``map/connect`` under ``toploc/<robot_id>/`` from a map database
-file; :class:`MapClient` is what a client uses to talk to it.
+file; :class:`~toploc.bus.clients.mapdb.MapClient` (also importable from here) is what a client
+uses to talk to it.
 
 - ``map/rooms`` -> ``{"rooms": [{"id", "name", "n_places"}]}``
 - ``map/places`` (optional ``{"room": name}``) -> ``{"places": [Place fields]}``; positions in
@@ -23,9 +24,9 @@ map, a lock) becomes an error reply and nothing is written.
 
 - ``map/changed`` (publication, after each write, before its reply): ``{"kind": "changed",
   "what": "add" | "connect", "stamp"}``. A localizer in this process or another one reloads
-  its map when it hears it (:func:`subscribe_changes`, :class:`toploc.service.MapRefresher`):
-  it reads the same SQLite file, so a map node and a localizer node in two processes need the
-  same file (one machine, or shared storage).
+  its map when it hears it (:func:`~toploc.bus.clients.mapdb.subscribe_changes`,
+  :class:`toploc.service.MapRefresher`): it reads the same SQLite file, so a map node and a
+  localizer node in two processes need the same file (one machine, or shared storage).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ from __future__ import annotations
 import hashlib
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -45,24 +45,25 @@ from mapdb.database import MapDatabase
 from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
 from mapdb.records import NewPlace, Place, check_name
 from toploc import bus
+from toploc.bus.clients.mapdb import ADD_TIMEOUT_S, MapClient, subscribe_changes
+from toploc.bus.png_codec import check_png
+from toploc.bus.schemas import (
+    ADD,
+    ADDED,
+    CHANGED,
+    CONNECT,
+    CONNECTED,
+    EDGES,
+    PLACES,
+    PLACES_QUERY,
+    ROOMS,
+)
 from toploc.limits import Limits
-from toploc.nodes.node import Client, Node
+from toploc.nodes.node import Node
+
+__all__ = ["ADD_TIMEOUT_S", "NODE_NAME", "MapClient", "MapNode", "subscribe_changes"]
 
 NODE_NAME = "mapdb"
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-ADD_TIMEOUT_S = 60.0
-"""How long :meth:`MapClient.add` waits: sending a large PNG and extracting its features."""
-POSE_FIELDS: dict[str, bus.FieldType] = {
-    "x_m": (float, type(None)),
-    "y_m": (float, type(None)),
-    "heading_deg": (float, type(None)),
-}
-ADDED_FIELDS: dict[str, bus.FieldType] = {
-    "place_id": int,
-    "room": str,
-    "new": bool,
-    "fingerprints": dict,
-}
 
 
 def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
@@ -133,29 +134,30 @@ class MapNode(Node):
     def _on_rooms(self, _payload: bytes | None) -> bus.Reply:
         with self._open() as map_db:
             rooms = [asdict(room) for room in map_db.rooms()]
-        return bus.Reply(bus.encode("rooms", {"rooms": rooms}))
+        return bus.Reply(ROOMS.encode({"rooms": rooms}))
 
     def _on_places(self, payload: bytes | None) -> bus.Reply:
         room = None
         if payload:
             limits = self.limits
-            request = bus.decode(
+            request = PLACES_QUERY.decode(
                 self.key(bus.MAP_PLACES),
                 payload,
+                check_kind=False,
                 max_bytes=limits.max_request_bytes,
                 max_string_chars=limits.max_string_chars,
             )
             if "room" in request:
-                bus.check_fields(self.key(bus.MAP_PLACES), request, {"room": str})
+                PLACES_QUERY.check_optional(self.key(bus.MAP_PLACES), request)
                 room = request["room"]
         with self._open() as map_db:
             places = [_json_safe(asdict(place)) for place in map_db.places(room)]
-        return bus.Reply(bus.encode("places", {"places": places}))
+        return bus.Reply(PLACES.encode({"places": places}))
 
     def _on_edges(self, _payload: bytes | None) -> bus.Reply:
         with self._open() as map_db:
             edges = [list(edge) for edge in map_db.edges()]
-        return bus.Reply(bus.encode("edges", {"edges": edges}))
+        return bus.Reply(EDGES.encode({"edges": edges}))
 
     def _open_writable(self, where: str) -> MapDatabase:
         try:
@@ -166,20 +168,19 @@ class MapNode(Node):
             ) from None
 
     def _changed(self, what: str) -> None:
-        self._changes.put(bus.encode("changed", {"what": what, "stamp": time.time()}))
+        self._changes.put(CHANGED.encode({"what": what, "stamp": time.time()}))
 
     def _decode_metadata(self, where: str, attachment: bytes | None) -> dict[str, Any]:
         """The checked metadata of a ``map/add`` request (the attachment)."""
         limits = self.limits
-        meta = bus.decode(
+        meta = ADD.decode(
             f"{where} (attachment)",
             attachment,
-            {"room": str},
-            "add",
+            True,
             limits.max_request_bytes,
             limits.max_string_chars,
         )
-        bus.check_fields(where, meta, {k: t for k, t in POSE_FIELDS.items() if k in meta})
+        ADD.check_optional(where, meta)
         try:
             check_name(meta["room"])
         except ValueError as error:
@@ -188,28 +189,12 @@ class MapNode(Node):
             raise bus.BusMessageError(f"{where}: give both 'x_m' and 'y_m', or neither")
         return meta
 
-    def _check_image(self, where: str, payload: bytes | None) -> bytes:
-        """The PNG bytes of a ``map/add`` request, within the limits (not decoded yet)."""
-        if not payload:
-            raise bus.BusMessageError(f"{where}: empty payload, expected a PNG panorama")
-        if len(payload) > self.limits.max_image_bytes:
-            raise bus.BusMessageError(
-                f"{where}: the image is {len(payload)} bytes; at most "
-                f"{self.limits.max_image_bytes} are accepted (max_image_bytes)"
-            )
-        if not payload.startswith(PNG_SIGNATURE):
-            raise bus.BusMessageError(
-                f"{where}: the payload is not a PNG image ({len(payload)} bytes, starts "
-                f"{payload[:8]!r})"
-            )
-        return payload
-
     def _on_add(self, payload: bytes | None, attachment: bytes | None) -> bus.Reply:
         from toploc.extraction import extract_image, map_overrides
 
         where = self.key(bus.MAP_ADD)
         meta = self._decode_metadata(where, attachment)
-        data = self._check_image(where, payload)
+        data = check_png(where, payload, self.limits.max_image_bytes)
         image = decode_grey(data, where, self.limits.max_image_pixels)
         sha = hashlib.sha256(data).hexdigest()
         place = NewPlace(
@@ -238,18 +223,13 @@ class MapNode(Node):
             "fingerprints": {f.detector: f.n for f in fingerprints},
             "refresh_after_s": self.refresh_after_s,
         }
-        return bus.Reply(bus.encode("added", reply))
+        return bus.Reply(ADDED.encode(reply))
 
     def _on_connect(self, payload: bytes | None) -> bus.Reply:
         where = self.key(bus.MAP_CONNECT)
         limits = self.limits
-        request = bus.decode(
-            where,
-            payload,
-            {"room_a": str, "room_b": str},
-            "connect",
-            limits.max_request_bytes,
-            limits.max_string_chars,
+        request = CONNECT.decode(
+            where, payload, True, limits.max_request_bytes, limits.max_string_chars
         )
         for field in ("room_a", "room_b"):
             try:
@@ -272,68 +252,4 @@ class MapNode(Node):
         if added:
             self._changed("connect")
         reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
-        return bus.Reply(bus.encode("connected", reply))
-
-
-def subscribe_changes(
-    session: zenoh.Session, robot_id: str, on_change: Callable[[], None]
-) -> zenoh.Subscriber:
-    """Call ``on_change()`` for each well-formed ``map/changed`` of ``robot_id``'s map node
-    (a malformed one is ignored); undeclare the subscriber to stop."""
-    return bus.subscribe(
-        session,
-        bus.key(robot_id, bus.MAP_CHANGED),
-        lambda key_expr, data: bus.decode(key_expr, data, {"what": str}, "changed"),
-        lambda _message: on_change(),
-    )
-
-
-class MapClient(Client):
-    """Query and extend the map of robot ``robot_id`` over ``session``.
-
-    Every call raises :class:`~toploc.bus.BusTimeout` if no map node answers in time,
-    :class:`~toploc.bus.BusReplyError` with the node's message for an error reply.
-    """
-
-    def __init__(
-        self,
-        session: zenoh.Session,
-        robot_id: str,
-        timeout_s: float = bus.DEFAULT_TIMEOUT_S,
-        add_timeout_s: float = ADD_TIMEOUT_S,
-    ) -> None:
-        super().__init__(session, robot_id, timeout_s)
-        self.add_timeout_s = add_timeout_s
-
-    def add(
-        self,
-        png: bytes,
-        room: str,
-        x_m: float | None = None,
-        y_m: float | None = None,
-        heading_deg: float | None = None,
-    ) -> dict[str, Any]:
-        """Add the panorama ``png`` as a place of ``room`` (pose optional, in the room's frame,
-        or another frame the caller documents); the reply (``place_id``, ``new``, ...)."""
-        meta: dict[str, Any] = {"room": room}
-        for name, value in (("x_m", x_m), ("y_m", y_m), ("heading_deg", heading_deg)):
-            if value is not None:
-                meta[name] = value
-        key_expr = self.key(bus.MAP_ADD)
-        sample = bus.request(
-            self.session, key_expr, png, self.add_timeout_s, attachment=bus.encode("add", meta)
-        )
-        return bus.decode(key_expr, sample.payload.to_bytes(), ADDED_FIELDS)
-
-    def connect(self, room_a: str, room_b: str) -> dict[str, Any]:
-        """Add the room-graph edge ``room_a`` -- ``room_b``; the reply (``added``)."""
-        payload = bus.encode("connect", {"room_a": room_a, "room_b": room_b})
-        key_expr = self.key(bus.MAP_CONNECT)
-        return bus.request_json(self.session, key_expr, {"added": bool}, payload, self.timeout_s)
-
-    def places(self, room: str | None = None) -> list[dict[str, Any]]:
-        """The map's places (of ``room`` if given)."""
-        payload = None if room is None else bus.encode("places", {"room": room})
-        key_expr = self.key(bus.MAP_PLACES)
-        reply = bus.request_json(self.session, key_expr, {"places": list}, payload, self.timeout_s)
-        return list(reply["places"])
+        return bus.Reply(CONNECTED.encode(reply))

@@ -1,6 +1,9 @@
-"""A :class:`toploc.bus.BusConfig` from the command line's options and a user's Zenoh file, and
-what such a session exposes.
+"""What a session is configured with: :class:`BusConfig`, and one made from the command line's
+options and a user's Zenoh file (:func:`bus_config`, :func:`client_bus_config`); and what such
+a session exposes (:func:`exposure_warning`).
 
+A user's own Zenoh configuration file (``BusConfig.zenoh_file``, JSON5) brings Zenoh's
+authentication (``transport/auth/usrpwd``), access control (``access_control``) and TLS.
 Precedence, per setting (mode, listen endpoints, connect endpoints, multicast scouting):
 
 1. the option the user gave (``--mode``, ``--listen``, ``--connect``);
@@ -17,15 +20,82 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import zenoh
 
-from toploc.bus import DEFAULT_ENDPOINT, BusConfig, load_zenoh_file
+from toploc.bus.errors import ZenohConfigError
+from toploc.bus.keys import check_robot_id, default_robot_id
 
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+MODES = ("peer", "client", "router")
 _LOOPBACK_NAMES = {"localhost", "localhost.localdomain", "ip6-localhost"}
+
+
+def one_line(zenoh_message: str) -> str:
+    """Zenoh's error text on one line, without the Rust source location it ends with."""
+    text = re.sub(r"\s+at \S+\.rs:\d+\.?\s*$", "", zenoh_message.strip())
+    return " ".join(text.split())
+
+
+def load_zenoh_file(path: Path) -> zenoh.Config:
+    """Read a Zenoh configuration file (JSON5, ``zenoh.Config.from_file``); raises
+    :class:`ZenohConfigError` naming the file and Zenoh's message on one line."""
+    try:
+        return zenoh.Config.from_file(str(path))
+    except zenoh.ZError as error:
+        raise ZenohConfigError(f"Zenoh configuration {path}: {one_line(str(error))}") from None
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """Where a session listens and connects. Defaults: a peer on 127.0.0.1:7447, no multicast,
+    the robot id of this machine (:func:`default_robot_id`).
+
+    ``listen``/``connect`` are Zenoh endpoints (``tcp/host:port``, ``udp/...``, ...). A client
+    application usually listens nowhere (``listen=()``) and connects to the service.
+    ``zenoh_file`` is a full Zenoh configuration (JSON5: authentication, access control, TLS)
+    that the session starts from; mode, endpoints and multicast scouting are always written
+    over it (:func:`bus_config` takes them from the file where the user gave
+    no option).
+    """
+
+    robot_id: str = field(default_factory=default_robot_id)
+    mode: str = "peer"
+    listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    connect: tuple[str, ...] = ()
+    scouting_multicast: bool = False
+    zenoh_file: Path | None = None
+
+    def __post_init__(self) -> None:
+        check_robot_id(self.robot_id)
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        for name in ("listen", "connect"):
+            endpoints = getattr(self, name)
+            if isinstance(endpoints, str):
+                raise ValueError(
+                    f"{name} must be a list of endpoints, not the string {endpoints!r}"
+                )
+            bad = [e for e in endpoints if not isinstance(e, str) or "/" not in e]
+            if bad:
+                raise ValueError(f"{name}: {bad[0]!r} is not an endpoint like {DEFAULT_ENDPOINT!r}")
+            object.__setattr__(self, name, tuple(endpoints))
+        if self.mode == "client" and not self.connect:
+            raise ValueError("a session in client mode needs at least one connect endpoint")
+
+    def to_zenoh(self) -> zenoh.Config:
+        """The ``zenoh.Config``: ``zenoh_file`` (or Zenoh's defaults), then this config's mode,
+        endpoints and multicast scouting written over it with ``insert_json5``."""
+        config = zenoh.Config() if self.zenoh_file is None else load_zenoh_file(self.zenoh_file)
+        config.insert_json5("mode", json.dumps(self.mode))
+        config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        config.insert_json5("scouting/multicast/enabled", json.dumps(self.scouting_multicast))
+        return config
 
 
 @dataclass(frozen=True)
@@ -82,7 +152,7 @@ def bus_config(
 ) -> BusConfig:
     """The service's session: each of ``mode``/``listen``/``connect`` given wins, else the
     file's, else toploc's default (see the module docstring). Raises ``ValueError`` (a
-    :class:`toploc.bus.ZenohConfigError` for an unreadable file)."""
+    :class:`~toploc.bus.errors.ZenohConfigError` for an unreadable file)."""
     found = FileSettings()
     if zenoh_file is not None:
         found = file_settings(load_zenoh_file(zenoh_file), mode)

@@ -1,0 +1,157 @@
+"""Every JSON message of the bus, declared once: its ``kind`` and its fields' JSON types.
+
+A :class:`Schema`'s ``fields`` are those every reader requires (``float`` accepts a JSON integer;
+``(float, type(None))`` allows null); ``optional`` those a message may leave out, checked where
+a reader says so (:meth:`Schema.check_optional`). The keys are :mod:`toploc.bus.keys`'; the
+README's bus table describes each message. Conversions from and to toploc's own types (odometry,
+belief, homing results) are :mod:`toploc.bus.messages`'.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from toploc.bus.json_codec import FieldType, check_fields, decode, encode
+
+NULL = type(None)
+
+
+@dataclass(frozen=True)
+class Schema:
+    """One message: ``{"schema": 1, "kind": kind, **fields}``."""
+
+    kind: str
+    fields: Mapping[str, FieldType] = field(default_factory=dict)
+    optional: Mapping[str, FieldType] = field(default_factory=dict)
+
+    def encode(self, values: Mapping[str, Any]) -> bytes:
+        """``values`` as this message's UTF-8 JSON (:func:`~toploc.bus.json_codec.encode`)."""
+        return encode(self.kind, values)
+
+    def decode(
+        self,
+        key_expr: str,
+        data: bytes | None,
+        check_kind: bool = True,
+        max_bytes: int | None = None,
+        max_string_chars: int | None = None,
+    ) -> dict[str, Any]:
+        """The message in ``data`` received on ``key_expr``, its envelope and ``fields`` checked
+        (its kind too if ``check_kind``); :class:`~toploc.bus.errors.BusMessageError` else."""
+        kind = self.kind if check_kind else None
+        return decode(key_expr, data, self.fields, kind, max_bytes, max_string_chars)
+
+    def check_optional(self, where: str, message: Mapping[str, Any]) -> None:
+        """Check the ``optional`` fields ``message`` carries (prefixed ``where``)."""
+        check_fields(where, message, {k: t for k, t in self.optional.items() if k in message})
+
+
+# --- the base and the camera: toploc.nodes.robot, toploc.nodes.camera ----------------------
+
+CMD = Schema("cmd", {"turn_deg": float, "forward_m": float})
+"""``base/cmd`` request: turn, then drive forward (degrees, metres)."""
+ODOM = Schema("odom", {"x_m": float, "y_m": float, "heading_deg": float, "stamp": float})
+"""``base/odom``: the odometry pose (REP-103, metres and degrees) and its stamp (epoch s)."""
+MOVE = Schema("move", {"turned_deg": float, "moved_m": float, "bumped": bool, "odom": dict})
+"""``base/cmd`` reply: what the move did; ``odom`` holds the :data:`ODOM` fields after it."""
+BUMPERS = Schema("bumpers", {"bumped": bool, "stamp": float})
+"""``base/bumpers`` publication after each move."""
+STOP = Schema("stop")
+"""``base/stop`` request."""
+STOPPED = Schema("stopped", {"stopped": bool})
+"""``base/stop`` reply."""
+CAPTURE = Schema(
+    "capture", {"capture_id": int, "stamp": float, "heading_deg": float, "source": str}
+)
+"""The JSON attachment of a ``camera/capture`` reply and a ``camera/panorama`` publication."""
+
+# --- the localizer: toploc.nodes.localizer --------------------------------------------------
+
+BELIEF = Schema("belief", optional={"stale": bool, "age_s": (float, NULL)})
+"""``localizer/belief``: :meth:`localizer.belief.RoomBelief.to_json`'s fields, checked by
+:func:`toploc.bus.messages.check_belief`; a stale belief adds the optional fields."""
+LOCALIZE = Schema("localize", optional={"active": bool, "timeout_s": float})
+"""``localizer/localize`` request (optional: no payload at all is a passive localize)."""
+RESET = Schema("reset", optional={"prior": dict})
+"""``localizer/reset`` request; ``prior``: ``{room: p}`` (see :mod:`toploc.bus.messages`)."""
+
+# --- the map: toploc.nodes.mapdb ------------------------------------------------------------
+
+ROOMS = Schema("rooms", {"rooms": list})
+"""``map/rooms`` reply: ``[{id, name, n_places}]``."""
+PLACES_QUERY = Schema("places", optional={"room": str})
+"""``map/places`` request (optional; its kind is not checked)."""
+PLACES = Schema("places", {"places": list})
+"""``map/places`` reply: the places' fields."""
+EDGES = Schema("edges", {"edges": list})
+"""``map/edges`` reply: ``[[room_a, room_b]]``."""
+ADD = Schema(
+    "add",
+    {"room": str},
+    {"x_m": (float, NULL), "y_m": (float, NULL), "heading_deg": (float, NULL)},
+)
+"""``map/add`` request: the JSON attachment of the PNG payload (pose in the room's frame)."""
+ADDED = Schema(
+    "added",
+    {"place_id": int, "room": str, "new": bool, "fingerprints": dict},
+    {"refresh_after_s": (float, NULL)},
+)
+"""``map/add`` reply; ``fingerprints`` ``{detector: n}``."""
+CONNECT = Schema("connect", {"room_a": str, "room_b": str})
+"""``map/connect`` request."""
+CONNECTED = Schema("connected", {"room_a": str, "room_b": str, "added": bool})
+"""``map/connect`` reply (a client reads ``added`` only)."""
+CHANGED = Schema("changed", {"what": str}, {"stamp": float})
+"""``map/changed`` publication after each write; ``what``: ``add`` or ``connect``."""
+
+# --- homing: toploc.nodes.homing ------------------------------------------------------------
+
+GOAL = Schema("goal", {"place_id": int}, {"timeout_s": float})
+"""``homing/goal`` request (``timeout_s`` > 0, checked by the node)."""
+HOMING_RESULT = Schema(
+    "homing",
+    {"place_id": int, "arrived": bool, "reason": str, "steps": int, "distance_m": float},
+)
+"""``homing/goal`` reply."""
+CANCEL = Schema("cancel")
+"""``homing/cancel`` request (optional)."""
+CANCELLED = Schema("cancelled", {"cancelled": bool})
+"""``homing/cancel`` reply: whether a drive was running."""
+PROGRESS = Schema(
+    "progress",
+    {"place_id": int},
+    {
+        "step": int,
+        "features": int,
+        "matched": int,
+        "home_length": (float, NULL),
+        "parallax_deg": (float, NULL),
+        "moved_m": float,
+        "state": str,
+    },
+)
+"""``homing/progress`` publication after each capture of a drive, and once at its end."""
+
+# --- the simulation only: toploc.nodes.sim_truth --------------------------------------------
+
+TRUE_POSE = Schema(
+    "true_pose",
+    {
+        "x_m": float,
+        "y_m": float,
+        "heading_deg": float,
+        "world": str,
+        "room": (str, NULL),
+        "stamp": float,
+    },
+)
+"""``sim/true_pose``: the simulated base's pose in the building frame of ``world``."""
+KIDNAP = Schema("kidnap", {"room": str})
+"""``sim/kidnap`` request; the reply is a :data:`TRUE_POSE`."""
+
+# --- every key ------------------------------------------------------------------------------
+
+ERROR = Schema("error", {"error": str}, {"retry_after_s": float})
+"""An error reply (``Query.reply_err``); ``retry_after_s``: a refusal for now (a rate limit)."""
