@@ -18,7 +18,12 @@ from tqdm import tqdm
 
 from localizer.calibration import MAX_QUERIES, calibrate, motions_to_try
 from localizer.evidence import EvidenceParams
-from localizer.features import CAMERA_DEFAULTS, ExtractionParams, params_from_preset
+from localizer.features import (
+    CAMERA_DEFAULTS,
+    PRESETS,
+    ExtractionParams,
+    params_from_preset,
+)
 from localizer.likelihood import RatioLikelihood
 from localizer.localizer import LoadedMap
 from mapdb.build import Status, build_map
@@ -26,7 +31,7 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import MANIFEST_NAME, read_edges, read_manifest
 from mapdb.errors import EmptyMapError
 from mapdb.graph import connect_known_rooms
-from mapdb.loading import load_snapshot
+from mapdb.loading import load_snapshot, open_for_reading
 from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
@@ -43,7 +48,34 @@ def load_map(
     database closed again). Raises :class:`mapdb.errors.MapDatabaseError` with a one-line
     message for a map without ``detector`` fingerprints (``EmptyMapError``, also a
     ``ValueError``) and for a missing, locked or damaged file."""
+    check_detector(db_path, detector)
     return LoadedMap.from_snapshot(load_snapshot(db_path, detector), use_index)
+
+
+def check_detector(db_path: Path | str, detector: str) -> None:
+    """Raise :class:`mapdb.errors.EmptyMapError` naming the detectors the map at ``db_path``
+    holds unless one is ``detector`` (a missing or damaged file: ``MapDatabaseError``)."""
+    with open_for_reading(Path(db_path)) as map_db:
+        held = sorted(map_db.fingerprint_counts())
+    if detector in held:
+        return
+    if not held:
+        message = (
+            f"map {db_path} has no places yet: build it first (toploc map build) or record "
+            "some (toploc map record)"
+        )
+    else:
+        known = sorted({params_from_preset(name).detector for name in PRESETS})
+        how = (
+            f"a map holds {detector} fingerprints when it is built with --detector {detector}"
+            if detector in known
+            else f"toploc's detectors are {', '.join(known)}"
+        )
+        message = (
+            f"map {db_path} has no {detector!r} fingerprints: it holds {', '.join(held)} "
+            f"(--detector {held[0]}; {how})"
+        )
+    raise EmptyMapError(message, db_path)
 
 
 def calibrate_map(
@@ -75,17 +107,16 @@ def kidnapped_robot(
     condition: str = "default",
 ) -> SimulatedRobot:
     """The simulated robot at a seeded random pose in ``room``, with a camera that captures
-    panoramas of the same size as the map's and ``motion_noise`` (fraction of each turn and
-    drive)."""
+    panoramas of the same size as the map's (a map without places: the renderer's default
+    size, 1024 x 192, as the robot node's sim camera) and ``motion_noise`` (fraction of each
+    turn and drive)."""
     with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
         places = map_db.places()
-    if not places:
-        raise EmptyMapError(
-            f"map {db_path} has no places: build it first (toploc map build)", db_path
+    camera = PanoramaCamera(height_m=world.camera_height_m)
+    if places:
+        camera = PanoramaCamera(
+            places[0].image_width_px, places[0].image_height_px, height_m=world.camera_height_m
         )
-    camera = PanoramaCamera(
-        places[0].image_width_px, places[0].image_height_px, height_m=world.camera_height_m
-    )
     noise = MotionNoise(motion_noise, motion_noise)
     return SimulatedRobot.kidnapped(
         world, room, seed=seed, condition=condition, camera=camera, noise=noise
@@ -112,10 +143,16 @@ def ensure_world_map(
     done_marker = folder / f"built-{detector}"
     if done_marker.exists() and db_path.exists():
         outdated = outdated_cache_map(db_path, detector)
-        if outdated is None:
+        changed = None if outdated else changed_cache_map(db_path, dataset)
+        if outdated is None and changed is None:
             _calibrate_once(db_path, detector, progress)
             return db_path
-        print(f"{db_path}: made by an older toploc ({outdated}); making it again", file=sys.stderr)
+        why = (
+            f"made by an older toploc ({outdated})"
+            if outdated
+            else f"not as toploc built it ({changed})"
+        )
+        print(f"{db_path}: {why}; making it again", file=sys.stderr)
         done_marker.unlink(missing_ok=True)  # another process may be remaking it too
         for suffix in ("", "-wal", "-shm"):
             db_path.with_name(db_path.name + suffix).unlink(missing_ok=True)
@@ -158,6 +195,20 @@ def outdated_cache_map(db_path: Path, detector: str) -> str | None:
     except ValueError:
         return "its likelihood is of an older kind"
     return None if count == RatioLikelihood().count else "its likelihood reads another count"
+
+
+def changed_cache_map(db_path: Path, dataset: Path) -> str | None:
+    """How a cached world map differs from the one :func:`ensure_world_map` built from
+    ``dataset``, or None: its place count is not its dataset's image count (places added to
+    it, say by ``toploc map add --db`` on the cache file), or the dataset is gone."""
+    if not (dataset / MANIFEST_NAME).exists():
+        return f"its dataset {dataset} is gone"
+    expected = len(read_manifest(dataset))
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        held = map_db.info().n_places
+    if held != expected:
+        return f"it holds {held} places, its dataset {expected}"
+    return None
 
 
 def _calibrate_once(db_path: Path, detector: str, progress: bool) -> None:

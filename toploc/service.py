@@ -18,6 +18,9 @@ on the grown map (about 20 s per detector here) and swaps the map in again with 
 
 With ``allow_empty`` a map without places is served too (a user about to record one): the
 localizer keys answer "the map has no places yet" until the first places are recorded.
+
+toploc's built-in world map (the demo's, served when no map is named: ``builtin_map``) is never
+written through the bus: ``map/add`` and ``map/connect`` reply with :data:`BUILTIN_MAP_REFUSAL`.
 """
 
 from __future__ import annotations
@@ -49,6 +52,12 @@ from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.runner import LocalizationRunner
 
 REFRESH_SETTLE_S = 2.0
+BUILTIN_MAP_REFUSAL = (
+    "{db} is toploc's built-in map of a rendered world (the demo's), which the bus does not "
+    "write to: to record your own map, serve one with toploc serve --db FILE --new-map (or "
+    "--db FILE for a map you have); nothing was written"
+)
+"""The error reply of ``map/add`` and ``map/connect`` on the built-in map (``{db}``: its path)."""
 _log = logging.getLogger(__name__)
 
 
@@ -248,6 +257,14 @@ def enter_localizer_nodes(
     return LocalizerNodes(runner, localizer, refresher, homing)
 
 
+class ReadOnlyMapNode(MapNode):
+    """A :class:`MapNode` that serves the built-in map's rooms, places and edges but refuses
+    every write (``map/add``, ``map/connect``) with :data:`BUILTIN_MAP_REFUSAL`."""
+
+    def _open_writable(self, where: str) -> MapDatabase:
+        raise bus.BusMessageError(f"{where}: {BUILTIN_MAP_REFUSAL.format(db=self.db_path)}")
+
+
 def enter_map_node(
     stack: ExitStack,
     session: zenoh.Session,
@@ -256,12 +273,15 @@ def enter_map_node(
     limits: Limits,
     localizer_config: LocalizerConfig | None = None,
     refresh_settle_s: float = REFRESH_SETTLE_S,
+    builtin_map: bool = False,
 ) -> MapNode:
     """The map node of ``db_path`` (``toploc node map``); ``map/add`` reads panoramas with the
-    localizer's camera model and extracts its detector into an empty map."""
+    localizer's camera model and extracts its detector into an empty map. ``builtin_map``:
+    ``db_path`` is toploc's own world map, which the node refuses to write."""
     localizer_config = localizer_config or LocalizerConfig()
+    node_class = ReadOnlyMapNode if builtin_map else MapNode
     return stack.enter_context(
-        MapNode(
+        node_class(
             session, robot_id, db_path, limits, str(localizer_config.camera),
             detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
         )
@@ -280,13 +300,15 @@ def start_service(
     refresh_settle_s: float = REFRESH_SETTLE_S,
     recalibrate: bool = True,
     allow_empty: bool = False,
+    builtin_map: bool = False,
 ) -> Iterator[Service]:
     """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
     robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
 
     Places and edges added over the bus are used ``refresh_settle_s`` after the last change;
     ``recalibrate`` then fits the likelihood again (:class:`MapRefresher`). ``allow_empty``:
-    serve a map without places (else :class:`mapdb.errors.EmptyMapError`). On exit a running
+    serve a map without places (else :class:`mapdb.errors.EmptyMapError`). ``builtin_map``:
+    ``db_path`` is toploc's own world map, never written over the bus. On exit a running
     localization is ended (at its next capture or move), then everything is undeclared and the
     session closed (an unclosed session keeps the process alive). The nodes are those of
     ``toploc node robot``, ``localizer`` and ``map`` (the ``enter_*`` functions), on one session.
@@ -304,8 +326,9 @@ def start_service(
         )  # fmt: skip
         # last: a place added as soon as it answers is refreshed too
         enter_map_node(
-            stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s
-        )
+            stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s,
+            builtin_map,
+        )  # fmt: skip
         yield Service(session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing)
 
 

@@ -363,7 +363,7 @@ def test_belief_cli_against_a_running_node(localizer_bus):
     assert done.exit_code == 0, done.output
     assert [c[0] for c in service.calls[-2:]] == ["reset", "localize"]
     assert service.calls[-1] == ("localize", True)
-    assert "state: localized" in done.output
+    assert "localized in office_a" in done.output
     assert "best place: place 4 in office_a (37 inliers)" in done.output
     assert done.output.index("office_a") < done.output.index("office_b")
 

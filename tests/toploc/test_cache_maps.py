@@ -1,5 +1,5 @@
 """toploc's own cached world maps (the demo's, `sim kidnap`'s) are made again when an older
-toploc made them; a user's map never is."""
+toploc made them or they are not as toploc built them; a user's map never is."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
 from mapdb.database import MapDatabase
 from mapdb.records import NewPlace
-from toploc.maps import ensure_world_map, outdated_cache_map
+from toploc.maps import changed_cache_map, ensure_world_map, outdated_cache_map
 
 
 def panorama(seed: int) -> np.ndarray:
@@ -74,3 +74,42 @@ def test_an_outdated_cached_world_map_is_made_again(
         assert len(map_db.places()) == 4  # the dataset's, not the old map's one place
         likelihood = map_db.likelihood("sift")
     assert likelihood is not None and likelihood["count"] == "spread"
+
+
+def square_dataset(folder: Path) -> Path:
+    """A cached world's dataset of four random panoramas, two rooms."""
+    dataset = folder / "dataset"
+    (dataset / "images").mkdir(parents=True)
+    rows = ["image,room,x_m,y_m,heading_deg"]
+    for i, room in enumerate(("hall", "hall", "lab", "lab")):
+        cv2.imwrite(str(dataset / "images" / f"p{i}.png"), panorama(i))
+        rows.append(f"images/p{i}.png,{room},{i},0,0")
+    (dataset / "manifest.csv").write_text("\n".join(rows) + "\n")
+    return dataset
+
+
+def test_a_cached_world_map_with_places_added_to_it_is_made_again(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    square_dataset(tmp_path / "square-0")
+    db_path = ensure_world_map("square", root=tmp_path, progress=False)
+    capsys.readouterr()
+    with MapDatabase.open(db_path) as map_db:  # as `toploc map add --db <the cache's map>` does
+        fresh = extract_with_camera(panorama(7), CameraSpec(), "sift")
+        map_db.add_place(NewPlace("garage", "cd" * 32, "mine.png"), [fresh])
+
+    assert ensure_world_map("square", root=tmp_path, progress=False) == db_path
+    assert "not as toploc built it (it holds 5 places, its dataset 4)" in capsys.readouterr().err
+    with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert sorted(room.name for room in map_db.rooms()) == ["hall", "lab"]
+
+
+def test_a_cached_world_map_as_built_is_reused_without_a_word(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    square_dataset(tmp_path / "square-0")
+    db_path = ensure_world_map("square", root=tmp_path, progress=False)
+    capsys.readouterr()
+    assert changed_cache_map(db_path, tmp_path / "square-0" / "dataset") is None
+    assert ensure_world_map("square", root=tmp_path, progress=False) == db_path
+    assert capsys.readouterr().err == ""

@@ -178,6 +178,28 @@ def test_a_read_only_map_refuses_the_add_clearly(service, client, monkeypatch):
     assert n_places(db_path) == before
 
 
+def test_the_built_in_map_is_never_written_over_the_bus(building_map, tmp_path):
+    db_path = tmp_path / "map.db"
+    shutil.copy(building_map[0], db_path)
+    before = n_places(db_path)
+    endpoint = free_endpoint()
+    config = BusConfig(robot_id="rbuiltin", listen=(endpoint,))
+    robot = robot_in("kitchen", 2.2, 2.9, 75.0)
+    client_config = BusConfig(robot_id="rbuiltin", listen=(), connect=(endpoint,))
+    with (
+        start_service(db_path, config, robot, builtin_map=True, recalibrate=False),
+        open_session(client_config) as session,
+    ):
+        client = MapClient(session, "rbuiltin")
+        advice = "toploc serve --db FILE --new-map"
+        with pytest.raises(bus.BusReplyError, match=f"built-in map.*{advice}"):
+            client.add(panorama("kitchen", 1.5, 1.5), "kitchen")
+        with pytest.raises(bus.BusReplyError, match=f"built-in map.*{advice}"):
+            client.connect("kitchen", "seminar")
+        assert len(client.places("kitchen")) > 0  # reading it is as before
+    assert n_places(db_path) == before
+
+
 class FakeRunner:
     def __init__(self) -> None:
         self.maps: list[object] = []

@@ -1,5 +1,6 @@
 """``toploc node robot|camera|localizer|map``: each node in a process of its own, joined only by
-Zenoh on 127.0.0.1 (the map node listens, the others connect), as a user runs them."""
+Zenoh on 127.0.0.1 (the map node listens, the others connect), as a user runs them; and
+``toploc serve`` (all of them in one process) on a new map, stopped by either signal."""
 
 from __future__ import annotations
 
@@ -31,9 +32,10 @@ READY = "Ctrl-C stops."
 
 
 class Node:
-    """A ``python -m toploc node ...`` process; its output lines on a queue."""
+    """A ``python -m toploc node ...`` (``command``: another toploc command) process; its output
+    lines on a queue."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, command: tuple[str, ...] = ("node",)) -> None:
         self.args = args
         env = {
             **os.environ,
@@ -41,7 +43,7 @@ class Node:
             "PYTHONUNBUFFERED": "1",
         }
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "toploc", "node", *args],
+            [sys.executable, "-m", "toploc", *command, *args],
             cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         )  # fmt: skip
         self.lines: queue.Queue[str] = queue.Queue()
@@ -223,3 +225,40 @@ def test_sigusr1_prints_every_threads_stack_and_the_node_goes_on(tmp_path: Path,
             time.sleep(0.05)
         assert node.process.poll() is None
     assert node.process.returncode == 0 and node.output[-1] == "stopped"
+
+
+@pytest.mark.parametrize(
+    ("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 0)], ids=["ctrl-c", "sigterm"]
+)
+def test_serve_on_a_new_map_with_the_simulated_robot_waits_for_places_until_stopped(
+    tmp_path: Path, signum: int, code: int
+) -> None:
+    db = tmp_path / "new.db"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    args = ("--db", str(db), "--new-map", "--listen", endpoint, "--robot-id", "s1")
+    serve = Node(*args, command=("serve",))
+    try:
+        assert "serving" in serve.wait_ready(60.0)
+        with (
+            client_session(endpoint, "s1") as session,
+            pytest.raises(bus.BusReplyError, match="the map has no places yet"),
+        ):
+            LocalizerClient(session, "s1", timeout_s=10).belief()
+        serve.process.send_signal(signum)
+        assert serve.process.wait(30) == code, "\n".join(serve.output)
+    finally:
+        serve.stop()
+    assert serve.output[-1] == "stopped"
+    assert db.exists()
+
+
+def test_a_serve_that_refuses_to_start_leaves_no_new_map_behind(tmp_path: Path) -> None:
+    db = tmp_path / "new.db"
+    result = subprocess.run(
+        [sys.executable, "-m", "toploc", "serve", "--db", str(db), "--new-map",
+         "--source", f"files:{tmp_path / 'none'}", "--robot-id", "s2"],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True,
+        text=True, timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 1 and "--source" in result.stderr, result
+    assert sorted(tmp_path.iterdir()) == []

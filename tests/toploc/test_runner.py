@@ -95,14 +95,17 @@ def test_the_service_localizes_over_zenoh_for_a_client_session(building_map):
 
 def test_the_demo_runs_end_to_end_on_a_cached_map(building_map, tmp_path, monkeypatch):
     cached = tmp_path / "building-0"
-    cached.mkdir()
+    shutil.copytree(building_map[1], cached / "dataset")  # the map is checked against it
     shutil.copy(building_map[0], cached / "map.db")
     (cached / "built-sift").touch()
     monkeypatch.setenv("TOPLOC_HOME", str(tmp_path))
     result = CliRunner().invoke(main, ["demo", "--endpoint", free_endpoint(), "--seed", "4"])
     assert result.exit_code == 0, result.output
+    assert "making it again" not in result.output
     assert "3/3 client: localize, active" in result.output
-    assert "the robot was kidnapped into office_b" in result.output
+    final = result.output.strip().splitlines()[-1]
+    assert final.startswith("final: localized in office_b"), result.output
+    assert final.endswith("the robot was kidnapped into office_b: right"), result.output
 
 
 def test_a_runner_on_a_map_without_places_waits_for_the_first_ones(loaded):

@@ -12,32 +12,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import click
 
 from toploc import bus
 from toploc.bus.config import client_bus_config
+from toploc.commands.belief_text import format_belief
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
-
-
-def format_belief(belief: dict[str, Any]) -> str:
-    """Human-readable belief: state, entropy, best place, then rooms by probability."""
-    best = belief["best_place"]
-    best_text = (
-        "none"
-        if best is None
-        else f"place {best['place_id']} in {best['room']} ({best['inliers']} inliers)"
-    )
-    rooms = sorted(belief["rooms"].items(), key=lambda item: (-item[1], item[0]))
-    width = max((len(room) for room, _ in rooms), default=0)
-    lines = [
-        f"state: {belief['state']}   entropy: {belief['entropy_bits']:.3f} bits   "
-        f"stamp: {belief['stamp']:.3f}",
-        f"best place: {best_text}",
-        *(f"  {room:<{width}}  {p:6.3f}  {'#' * round(40 * p)}" for room, p in rooms),
-    ]
-    return "\n".join(lines)
 
 
 @click.command("belief")

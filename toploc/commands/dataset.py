@@ -72,7 +72,14 @@ def dataset() -> None:
     default=None,
     help="Panorama projection [default: cylinder; photos equirect].",
 )
-@click.option("--width", "width_px", type=click.IntRange(min=8), default=1024, show_default=True)
+@click.option(
+    "--width",
+    "width_px",
+    type=click.IntRange(min=8),
+    default=1024,
+    show_default=True,
+    help="Image width in pixels (360 degrees).",
+)
 @click.option(
     "--height",
     "height_px",

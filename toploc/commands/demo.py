@@ -13,10 +13,10 @@ from typing import Any
 
 import click
 
-from localizer.policy import POLICIES
 from robot.worlds import make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError, open_session
-from toploc.commands.options import robot_id_option, warn_if_exposed
+from toploc.commands.belief_text import state_line
+from toploc.commands.options import policy_option, robot_id_option, warn_if_exposed
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.nodes.localizer import LocalizerClient
 from toploc.service import start_service
@@ -25,18 +25,28 @@ WORLD = "building"
 LOOK_ALIKE = ("office_a", "office_b")
 
 
-def format_belief(belief: dict[str, Any], t0: float, top: int = 3) -> str:
-    """``[  3.2 s] ambiguous   office_b 0.62  office_a 0.37  corridor 0.00``."""
-    ranked = sorted(belief["rooms"].items(), key=lambda rp: -rp[1])[:top]
-    rooms = "  ".join(f"{room} {p:.2f}" for room, p in ranked)
-    return f"[{time.monotonic() - t0:6.1f} s] {belief['state']:10s} {rooms}"
+def belief_line(belief: dict[str, Any], t0: float) -> str:
+    """``[  3.2 s] ambiguous: office_b 0.620, office_a 0.370, corridor 0.000``: the time since
+    ``t0`` (``time.monotonic()``) and :func:`~toploc.commands.belief_text.state_line`."""
+    return f"[{time.monotonic() - t0:6.1f} s] {state_line(belief)}"
 
 
 @click.command("demo")
-@click.option("--room", type=click.Choice(LOOK_ALIKE), default="office_b", show_default=True)
+@click.option(
+    "--room",
+    type=click.Choice(LOOK_ALIKE),
+    default="office_b",
+    show_default=True,
+    help="The look-alike office the robot is kidnapped into.",
+)
 @click.option("--seed", type=int, default=1, show_default=True, help="Seeds the kidnapped pose.")
-@click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
-@click.option("--endpoint", default=DEFAULT_ENDPOINT, show_default=True)
+@policy_option
+@click.option(
+    "--endpoint",
+    default=DEFAULT_ENDPOINT,
+    show_default=True,
+    help="The Zenoh endpoint the demo's service listens on and its client connects to.",
+)
 @robot_id_option
 def demo(room: str, seed: int, policy: str, endpoint: str, robot_id: str) -> None:
     """Kidnap the simulated robot into a look-alike office and watch toploc find out which."""
@@ -49,7 +59,7 @@ def demo(room: str, seed: int, policy: str, endpoint: str, robot_id: str) -> Non
     warn_if_exposed(service_config)
     robot = kidnapped_robot(world, room, seed, db_path)
     try:
-        with start_service(db_path, service_config, robot, policy):
+        with start_service(db_path, service_config, robot, policy, builtin_map=True):
             click.echo(f"2/3 service: Zenoh peer on {endpoint}, keys toploc/{robot_id}/**")
             with open_session(client_config) as session:
                 _client_run(session, robot_id, room)
@@ -62,15 +72,20 @@ def _client_run(session: Any, robot_id: str, true_room: str) -> None:
     t0 = time.monotonic()
     _wait_for_service(client)
     click.echo("3/3 client: localize, active (may drive); beliefs as published:")
-    client.subscribe(lambda belief: click.echo(format_belief(belief, t0)))
+    client.subscribe(lambda belief: click.echo(belief_line(belief, t0)))
     final = client.localize(active=True)
     time.sleep(0.2)  # let the last publication print first
-    top = max(final["rooms"], key=final["rooms"].get)
-    verdict = "right" if top == true_room else "WRONG"
     click.echo(
-        f"final: {final['state']} in {top} (p = {final['rooms'][top]:.3f}); "
-        f"the robot was kidnapped into {true_room}: {verdict}"
+        f"final: {state_line(final)}; the robot was kidnapped into {true_room}: "
+        f"{verdict(final, true_room)}"
     )
+
+
+def verdict(final: dict[str, Any], true_room: str) -> str:
+    """``right`` if the final belief names ``true_room`` as its answer (not lost), else
+    ``WRONG``."""
+    answered = final["state"] != "lost"
+    return "right" if answered and final["top"]["room"] == true_room else "WRONG"
 
 
 def _wait_for_service(client: LocalizerClient, timeout_s: float = 10.0) -> None:

@@ -10,12 +10,13 @@ from pathlib import Path
 import click
 
 from toploc.commands.localize import (
-    db_option,
     detector_option,
     index_option,
     load_localizer,
     localizer_errors,
+    map_db_option,
 )
+from toploc.commands.options import camera_option
 from toploc.evaluation.localization import (
     format_confusion,
     localize_dataset,
@@ -32,15 +33,21 @@ from toploc.evaluation.localization_report import (
 
 @click.command("localize")
 @click.argument("dataset", type=click.Path(file_okay=False, path_type=Path), required=False)
-@db_option
+@map_db_option
 @detector_option
 @index_option
+@camera_option
 @click.option(
     "--leave-one-out",
     is_flag=True,
     help="Query the map's own places, each against the map without it (no DATASET).",
 )
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the scores to this JSON file (keys: see the README).",
+)
 @click.option(
     "--plot",
     "plot_path",
@@ -48,12 +55,13 @@ from toploc.evaluation.localization_report import (
     default=None,
     help="Plot calibration (stated probability against how often right) and the outcomes (PNG).",
 )
-@click.option("--progress/--no-progress", default=True)
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
 def localize_command(
     dataset: Path | None,
     db_path: Path,
     detector: str,
     index: bool | None,
+    camera: str,
     leave_one_out: bool,
     json_path: Path | None,
     plot_path: Path | None,
@@ -71,7 +79,7 @@ def localize_command(
     if (dataset is None) == (not leave_one_out):
         raise click.UsageError("give a DATASET or --leave-one-out (not both)")
     with localizer_errors():
-        localizer = load_localizer(db_path, detector, index)
+        localizer = load_localizer(db_path, detector, index, camera)
         if leave_one_out:
             run = localize_leave_one_out(localizer, progress)
         else:

@@ -18,7 +18,8 @@ from localizer.cameras import parse_camera
 from localizer.localizer import Localizer, LocalizerConfig, Observation
 from localizer.panorama_io import PanoramaError, read_panorama
 from mapdb.errors import MapDatabaseError
-from toploc.commands.options import camera_option
+from toploc.commands.belief_text import format_belief
+from toploc.commands.options import camera_option, db_option
 from toploc.maps import load_map
 
 
@@ -43,9 +44,9 @@ def load_localizer(
 
 
 def describe(belief: RoomBelief, observation: Observation, top: int = 5) -> str:
-    """A few lines for people: state, the most likely rooms, best places and timings."""
-    lines = [f"state: {belief.state} (entropy {belief.entropy_bits:.2f} bits)"]
-    lines += [f"  {room:14s} {p:6.3f}" for room, p in belief.ranked()[:top]]
+    """A few lines for people: the belief (:func:`format_belief`, the ``top`` rooms), the best
+    places and the timings."""
+    lines = [format_belief(belief.to_json(), top)]
     lines.append("best places (room, place id, inliers / matches, share of the horizon):")
     lines += [
         f"  {e.room:14s} {e.place_id:5d} {e.inliers:5d} / {e.matches:<5d} {e.coverage:4.0%}"
@@ -56,15 +57,13 @@ def describe(belief: RoomBelief, observation: Observation, top: int = 5) -> str:
     return "\n".join(lines)
 
 
-db_option = click.option(
-    "--db",
-    "db_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The map database (SQLite), built by toploc map build.",
-)
+map_db_option = db_option("The map database (SQLite), built by toploc map build.")
 detector_option = click.option(
-    "--detector", default="sift", show_default=True, help="Extraction preset the map holds."
+    "--detector",
+    default="sift",
+    show_default=True,
+    help="The fingerprints to match: a detector the map holds (sift; mser if the map was "
+    "built with it).",
 )
 index_option = click.option(
     "--index/--brute-force",
@@ -75,7 +74,7 @@ index_option = click.option(
 
 @click.command("localize")
 @click.argument("image", type=click.Path(dir_okay=False, path_type=Path))
-@db_option
+@map_db_option
 @detector_option
 @index_option
 @camera_option

@@ -3,9 +3,10 @@ runs on the robot and the localizer elsewhere if wanted (``toploc serve`` runs t
 
 Each command opens its own Zenoh session, enters its node with the ``enter_*`` function of
 :mod:`toploc.service` that ``serve`` uses too, prints the robot id and what runs, and runs until
-Ctrl-C or SIGTERM. Each node refuses to start when its role already runs for the robot id
-(``alive/<role>``). The localizer node reloads its map on the map node's ``map/changed``; both
-read the same SQLite file, so they need the same file (one machine, or shared storage).
+Ctrl-C (exit status 130) or SIGTERM (0). Each node refuses to start when its role already runs
+for the robot id (``alive/<role>``). The localizer node reloads its map on the map node's
+``map/changed``; both read the same SQLite file, so they need the same file (one machine, or
+shared storage).
 """
 
 from __future__ import annotations
@@ -19,20 +20,25 @@ import zenoh
 
 from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
-from localizer.policy import POLICIES
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError
 from robot.p2os_base import P2osError
-from robot.worlds import WORLD_NAMES
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.commands.options import (
+    StopSignal,
     camera_option,
     check_robot_spec,
+    db_option,
     describe_bus,
-    map_path,
+    long_running,
+    map_file,
     node_options,
     node_setup,
     open_capture_source,
+    policy_option,
+    sim_room_option,
+    sim_seed_option,
+    sim_world_option,
     stop_on_signals,
     stopped,
 )
@@ -52,13 +58,7 @@ Enter = Callable[[ExitStack, zenoh.Session, Limits], str]
 """Enters a node (or two) on a session; returns what runs, for the line printed."""
 _ERRORS = (BusError, MapDatabaseError, P2osError, CameraError)
 
-db_option = click.option(
-    "--db",
-    "db_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="The map (SQLite). The map node and the localizer node need the same file.",
-)
+SHARED_MAP = "The map (SQLite). The map node and the localizer node need the same file."
 
 
 @click.group("node")
@@ -66,9 +66,11 @@ def node_group() -> None:
     """Run one node of the service per process (toploc serve runs them all in one)."""
 
 
-def _run(config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: ExitStack) -> None:
+def _run(
+    config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: ExitStack
+) -> StopSignal:
     """Open the session, ``enter(stack, session, limits)`` the node(s), print what runs and
-    wait for SIGINT or SIGTERM; a bus, map, base or camera error is one line."""
+    wait for SIGINT or SIGTERM (returned); a bus, map, base or camera error is one line."""
     stop = stack.enter_context(stop_on_signals())  # left last: the nodes close first
     try:
         session = stack.enter_context(open_session(config))
@@ -77,9 +79,11 @@ def _run(config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: 
         stop.wait()
     except _ERRORS as error:
         raise click.ClickException(str(error)) from error
+    return stop
 
 
 @node_group.command("robot")
+@long_running
 @click.option(
     "--robot",
     "robot_spec",
@@ -99,16 +103,14 @@ def _run(config: BusConfig, limits: Limits, describe: str, enter: Enter, stack: 
     is_flag=True,
     help="Serve the base only: a toploc node camera serves camera/capture for this robot id.",
 )
-@click.option("--sim-world", type=click.Choice(WORLD_NAMES), default="building", show_default=True)
-@click.option("--sim-room", default="office_b", show_default=True, help="Where it is kidnapped.")
-@click.option("--seed", type=int, default=1, show_default=True)
-@click.option(
-    "--db",
-    "db_path",
-    type=click.Path(dir_okay=False, exists=True, path_type=Path),
-    default=None,
-    help="A map whose panorama size the sim camera renders (default: the --sim-world's map "
-    "from the cache, as serve).",
+@sim_world_option
+@sim_room_option
+@sim_seed_option
+@db_option(
+    "A map whose panorama size the sim camera renders (default: the --sim-world's built-in "
+    "map from the cache, as serve; an empty map: 1024 x 192).",
+    required=False,
+    exists=True,
 )
 @node_options
 def robot_node(
@@ -147,11 +149,12 @@ def robot_node(
                 text += f", its camera at the true pose on toploc/{robot_id}/sim/true_pose"
             return f"{text}; camera: {'none (--no-camera)' if no_camera else source}"
 
-        _run(config, limits, "robot node: ", enter, stack)
-    click.echo("stopped")
+        stop = _run(config, limits, "robot node: ", enter, stack)
+    stopped(stop)
 
 
 @node_group.command("camera")
+@long_running
 @click.option(
     "--source",
     required=True,
@@ -182,13 +185,14 @@ def camera_node(
             enter_camera_node(stack, session, robot_id, camera, limits)
             return source
 
-        _run(config, limits, "camera node: ", enter, stack)
-    click.echo("stopped")
+        stop = _run(config, limits, "camera node: ", enter, stack)
+    stopped(stop)
 
 
 @node_group.command("localizer")
-@db_option
-@click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
+@long_running
+@db_option(SHARED_MAP, exists=True)
+@policy_option
 @camera_option
 @node_options
 def localizer_node(
@@ -204,25 +208,24 @@ def localizer_node(
 ) -> None:
     """The localizer and homing nodes, driving the bus's robot node, until interrupted."""
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
-    db = map_path(db_path, new_map=False)
-    assert db is not None
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
 
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
         refresher.append(enter_localizer_nodes(
-            stack, session, robot_id, db, policy, localizer_config, limits,
+            stack, session, robot_id, db_path, policy, localizer_config, limits,
             allow_empty=True,
         ).refresher)  # fmt: skip
-        return f"{db} (reloaded on map/changed), driving the bus's robot node"
+        return f"{db_path} (reloaded on map/changed), driving the bus's robot node"
 
     refresher: list[MapRefresher] = []
     with ExitStack() as stack:
-        _run(config, limits, "localizer and homing nodes: ", enter, stack)
-    stopped(refresher[0] if refresher else None)
+        stop = _run(config, limits, "localizer and homing nodes: ", enter, stack)
+    stopped(stop, refresher[0] if refresher else None)
 
 
 @node_group.command("map")
-@db_option
+@long_running
+@db_option(SHARED_MAP)
 @click.option("--new-map", is_flag=True, help="Create the --db file empty if it does not exist.")
 @camera_option
 @node_options
@@ -239,14 +242,12 @@ def map_node(
 ) -> None:
     """The map node (map/*; publishes map/changed after each write) until interrupted."""
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
-    db = map_path(db_path, new_map)
-    assert db is not None
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
 
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
-        enter_map_node(stack, session, robot_id, db, limits, localizer_config)
-        return str(db)
+        enter_map_node(stack, session, robot_id, db_path, limits, localizer_config)
+        return str(db_path)
 
-    with ExitStack() as stack:
-        _run(config, limits, "map node: ", enter, stack)
-    click.echo("stopped")
+    with map_file(db_path, new_map), ExitStack() as stack:
+        stop = _run(config, limits, "map node: ", enter, stack)
+    stopped(stop)

@@ -14,9 +14,11 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from localizer.cameras import parse_camera
+from localizer.policy import POLICIES
 from localizer.robot_protocol import Camera
 from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
+from robot.worlds import WORLD_NAMES
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
 from toploc.bus.config import bus_config, exposure_warning
 from toploc.limits import Limits, load_limits
@@ -42,6 +44,37 @@ camera_option = click.option(
         "cylinder), cylinder, equirect, or omni:CX,CY,R0,R1 (a mirror image, unwrapped around "
         "centre CX,CY between radii R0 and R1, pixels)."
     ),
+)
+
+
+policy_option = click.option(
+    "--policy",
+    type=click.Choice(sorted(POLICIES)),
+    default="separating",
+    show_default=True,
+    help="Where an active localization drives when the belief is ambiguous: separating (the "
+    "likely room's place whose view differs most from the rival rooms', minus travel) or "
+    "most-likely (the likely room's best-matching place, as the thesis).",
+)
+sim_world_option = click.option(
+    "--sim-world",
+    type=click.Choice(WORLD_NAMES),
+    default="building",
+    show_default=True,
+    help="The rendered world of the simulated robot.",
+)
+sim_room_option = click.option(
+    "--sim-room",
+    default="office_b",
+    show_default=True,
+    help="The room of --sim-world the simulated robot is kidnapped into.",
+)
+sim_seed_option = click.option(
+    "--seed",
+    type=int,
+    default=1,
+    show_default=True,
+    help="Seeds the simulated robot: its pose in --sim-room, its camera noise and motion.",
 )
 
 
@@ -157,13 +190,49 @@ def node_setup(
     return config, limits
 
 
+EXIT_CTRL_C = 130
+"""The exit status of a long-running command stopped by Ctrl-C (SIGINT): 128 + 2, as shells
+report it. Stopped by SIGTERM (a service manager's stop) it exits 0, which systemd counts as a
+clean stop."""
+STOP_SIGNALS_HELP = (
+    "Ctrl-C (SIGINT) stops it with exit status 130; SIGTERM (a service manager's stop) with 0."
+)
+"""The sentence each long-running command's help ends with (:func:`long_running`)."""
+
+
+def long_running(command: Any) -> Any:
+    """Put under ``@click.command``: ends the command's help with :data:`STOP_SIGNALS_HELP`
+    (it must wait on :func:`stop_on_signals` and exit through :func:`stopped`)."""
+    command.__doc__ = f"{(command.__doc__ or '').rstrip()}\n\n{STOP_SIGNALS_HELP}"
+    return command
+
+
+class StopSignal(threading.Event):
+    """Set by SIGINT or SIGTERM (:func:`stop_on_signals`); ``signum``: the first one."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.signum: int | None = None
+
+    def received(self, signum: int) -> None:
+        """Record ``signum`` (the first only) and set the event."""
+        if self.signum is None:
+            self.signum = signum
+        self.set()
+
+    @property
+    def exit_code(self) -> int:
+        """:data:`EXIT_CTRL_C` after SIGINT, else 0 (SIGTERM, or not stopped by a signal)."""
+        return EXIT_CTRL_C if self.signum == signal.SIGINT else 0
+
+
 @contextmanager
-def stop_on_signals() -> Iterator[threading.Event]:
+def stop_on_signals() -> Iterator[StopSignal]:
     """An event that SIGINT and SIGTERM set within the block (a node runs until it is set, and
     a Ctrl-C while it shuts down changes nothing); the previous handlers are back after it."""
-    stop = threading.Event()
+    stop = StopSignal()
     previous = {
-        signum: signal.signal(signum, lambda *_: stop.set())
+        signum: signal.signal(signum, lambda signum, _frame: stop.received(signum))
         for signum in (signal.SIGINT, signal.SIGTERM)
     }
     try:
@@ -192,12 +261,32 @@ def check_robot_spec(_ctx: click.Context, _param: click.Parameter, value: str) -
     return value
 
 
-def map_path(db_path: Path | None, new_map: bool) -> Path | None:
-    """``--db``, created empty with ``--new-map``; a missing one is an error."""
+def db_option(help: str, required: bool = True, exists: bool = False) -> Any:
+    """The ``--db FILE`` option (the ``db_path`` parameter, a ``Path``; None when not given):
+    the map database every command names the same way; ``exists``: click refuses a missing
+    file."""
+    return click.option(
+        "--db",
+        "db_path",
+        required=required,
+        default=None,
+        metavar="FILE",
+        type=click.Path(dir_okay=False, exists=exists, path_type=Path),
+        help=help,
+    )
+
+
+@contextmanager
+def map_file(db_path: Path | None, new_map: bool) -> Iterator[Path | None]:
+    """``--db`` for the block, created empty with ``--new-map``; a missing one is an error.
+    A map created here and still without a room when the block raises (the command refused
+    to start) is deleted: a refusal leaves no new file behind."""
     if db_path is None:
         if new_map:
             raise click.UsageError("--new-map needs --db FILE")
-        return None
+        yield None
+        return
+    created = False
     if not db_path.exists():
         if not new_map:
             raise click.BadParameter(
@@ -207,7 +296,25 @@ def map_path(db_path: Path | None, new_map: bool) -> Path | None:
             MapDatabase.open(db_path, create=True).close()
         except MapDatabaseError as error:
             raise click.ClickException(str(error)) from error
-    return db_path
+        created = True
+    try:
+        yield db_path
+    except BaseException:
+        if created:
+            _delete_if_empty(db_path)
+        raise
+
+
+def _delete_if_empty(db_path: Path) -> None:
+    """Delete the map at ``db_path`` (and its WAL files) if it holds no room."""
+    try:
+        with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+            empty = not map_db.rooms()
+    except MapDatabaseError:
+        return
+    if empty:
+        for suffix in ("", "-wal", "-shm"):
+            db_path.with_name(db_path.name + suffix).unlink(missing_ok=True)
 
 
 def open_capture_source(stack: ExitStack, source: str) -> Camera | None:
@@ -225,12 +332,15 @@ def open_capture_source(stack: ExitStack, source: str) -> Camera | None:
     return camera
 
 
-def stopped(refresher: MapRefresher | None) -> None:
-    """Print ``stopped``; if a map calibration still runs in ``refresher``'s thread, end the
-    process now (an interpreter exiting under a native OpenCV call aborts): the map keeps
-    the likelihood it had, as SQLite writes a calibration in one transaction."""
+def stopped(stop: StopSignal, refresher: MapRefresher | None = None) -> None:
+    """Print ``stopped`` and exit with ``stop``'s status (130 after Ctrl-C, 0 after SIGTERM);
+    if a map calibration still runs in ``refresher``'s thread, end the process now (an
+    interpreter exiting under a native OpenCV call aborts): the map keeps the likelihood it
+    had, as SQLite writes a calibration in one transaction."""
     click.echo("stopped")
     if refresher is not None and refresher.running:
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(0)
+        os._exit(stop.exit_code)
+    if stop.exit_code:
+        raise SystemExit(stop.exit_code)

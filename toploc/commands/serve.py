@@ -1,5 +1,10 @@
 """``toploc serve``: run the service until Ctrl-C (map, localizer and, by default, the simulated
 robot as Zenoh nodes on one session; ``toploc node ROLE`` runs one node per process).
+
+Exit status: 130 after Ctrl-C (SIGINT), 0 after SIGTERM (a service manager's stop), 1 with
+``Error: ...`` when it cannot start; a map that ``--new-map`` created is then deleted again.
+Without ``--db`` it serves toploc's built-in world map, which ``map/add`` and ``map/connect``
+refuse to write (record your own with ``--db FILE --new-map``).
 """
 
 from __future__ import annotations
@@ -11,20 +16,25 @@ import click
 
 from localizer.cameras import parse_camera
 from localizer.localizer import LocalizerConfig
-from localizer.policy import POLICIES
 from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.p2os_base import P2osError
-from robot.worlds import WORLD_NAMES
 from toploc.bus import BusConfig, BusError
 from toploc.commands.options import (
+    StopSignal,
     camera_option,
     check_robot_spec,
+    db_option,
     describe_bus,
-    map_path,
+    long_running,
+    map_file,
     node_options,
     node_setup,
     open_capture_source,
+    policy_option,
+    sim_room_option,
+    sim_seed_option,
+    sim_world_option,
     stop_on_signals,
     stopped,
 )
@@ -36,13 +46,12 @@ from toploc.service import MapRefresher, start_service
 
 
 @click.command("serve")
-@click.option(
-    "--db",
-    "db_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="The map (default: the --sim-world's map from the cache, made on first use); it may "
-    "have no places yet (record them with toploc map record).",
+@long_running
+@db_option(
+    "The map; it may have no places yet (record them with toploc map record). Default: "
+    "toploc's built-in map of the --sim-world, from the cache (made on first use), which the "
+    "bus does not write to.",
+    required=False,
 )
 @click.option(
     "--new-map",
@@ -50,16 +59,10 @@ from toploc.service import MapRefresher, start_service
     help="Create the --db file as an empty map if it does not exist.",
 )
 @node_options
-@click.option("--policy", type=click.Choice(sorted(POLICIES)), default="separating")
-@click.option(
-    "--sim-world",
-    type=click.Choice(WORLD_NAMES),
-    default="building",
-    show_default=True,
-    help="Serve a simulated robot in this rendered world.",
-)
-@click.option("--sim-room", default="office_b", show_default=True, help="Where it is kidnapped.")
-@click.option("--seed", type=int, default=1, show_default=True)
+@policy_option
+@sim_world_option
+@sim_room_option
+@sim_seed_option
 @click.option(
     "--no-sim", is_flag=True, help="No simulated robot: drive the robot node already on the bus."
 )
@@ -105,17 +108,16 @@ def serve(
 ) -> None:
     """Serve localization for one robot on the Zenoh bus until interrupted."""
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path)
-    db_path = map_path(db_path, new_map)
     if no_sim and source != "sim":
         raise click.ClickException(
             f"--source {source}: the camera is served by this service's robot node, which "
             "--no-sim leaves out (toploc node camera serves a camera without a base)"
         )
-    with ExitStack() as stack:
+    with map_file(db_path, new_map) as db_path, ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
-        refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
-                           robot_spec, camera, limits, source, capture_from)  # fmt: skip
-    stopped(refresher)
+        stop, refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
+                                 robot_spec, camera, limits, source, capture_from)  # fmt: skip
+    stopped(stop, refresher)
 
 
 def _serve(
@@ -131,8 +133,8 @@ def _serve(
     limits: Limits,
     source: str,
     capture_from: Camera | None,
-) -> MapRefresher:
-    """Run the service until SIGINT or SIGTERM; its map refresher."""
+) -> tuple[StopSignal, MapRefresher]:
+    """Run the service until SIGINT or SIGTERM; the signal and the service's map refresher."""
     db = db_path or ensure_world_map(sim_world)
     spec = None if no_sim else robot_spec
     try:
@@ -144,7 +146,7 @@ def _serve(
             ),
             start_service(
                 db, config, robot, policy, localizer_config, limits, capture_from,
-                allow_empty=db_path is not None,
+                allow_empty=db_path is not None, builtin_map=db_path is None,
             ) as service,
             ExitStack() as stack,
         ):  # fmt: skip
@@ -156,6 +158,6 @@ def _serve(
                 "Ctrl-C stops."
             )
             stop.wait()
-        return service.refresher
+        return stop, service.refresher
     except (BusError, MapDatabaseError, P2osError) as error:  # one line naming what failed
         raise click.ClickException(str(error)) from error

@@ -10,8 +10,8 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from localizer.policy import POLICIES
 from robot.conditions import CONDITIONS
+from toploc.commands.options import db_option, policy_option
 from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, run_kidnappings
 
 
@@ -20,22 +20,27 @@ def _print_trial(trial: Trial) -> None:
 
 
 @click.command("kidnap")
-@click.option("--world", type=click.Choice(sorted(KIDNAP_ROOMS)), default="building")
-@click.option("--trials", type=click.IntRange(min=1), default=20, show_default=True)
 @click.option(
-    "--policy",
-    type=click.Choice(sorted(POLICIES)),
-    default="separating",
+    "--world",
+    type=click.Choice(sorted(KIDNAP_ROOMS)),
+    default="building",
     show_default=True,
-    help="Where to drive when the belief is ambiguous.",
+    help="The rendered world, with its look-alike rooms to be kidnapped into.",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Seeds the kidnappings.")
 @click.option(
-    "--db",
-    "db_path",
-    type=click.Path(dir_okay=False, exists=True, path_type=Path),
-    default=None,
-    help="The world's map (default: rendered and built once into the cache, see README).",
+    "--trials",
+    type=click.IntRange(min=1),
+    default=20,
+    show_default=True,
+    help="How many kidnappings (each a seeded random pose in a look-alike room).",
+)
+@policy_option
+@click.option("--seed", type=int, default=0, show_default=True, help="Seeds the kidnappings.")
+@db_option(
+    "The world's map (default: toploc's built-in map of --world, rendered and built once "
+    "into the cache).",
+    required=False,
+    exists=True,
 )
 @click.option(
     "--condition",
@@ -44,9 +49,26 @@ def _print_trial(trial: Trial) -> None:
     show_default=True,
     help="Capture condition of the kidnapped robot's camera.",
 )
-@click.option("--motion-noise", type=click.FloatRange(min=0), default=0.05, show_default=True)
-@click.option("--max-targets", type=click.IntRange(min=0), default=4, show_default=True)
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--motion-noise",
+    type=click.FloatRange(min=0),
+    default=0.05,
+    show_default=True,
+    help="The robot's motion noise: standard deviation as a fraction of each turn and drive.",
+)
+@click.option(
+    "--max-targets",
+    type=click.IntRange(min=0),
+    default=4,
+    show_default=True,
+    help="The most places a trial drives to before it gives up.",
+)
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write every trial and the totals to this JSON file.",
+)
 def kidnap(
     world: str,
     trials: int,

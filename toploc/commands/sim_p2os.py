@@ -21,9 +21,11 @@ from robot.worlds import WORLD_NAMES, make_world
 from toploc.bus.config import client_bus_config
 from toploc.bus.session import open_when_up
 from toploc.commands.options import (
+    long_running,
     robot_id_option,
     service_endpoint_option,
     stop_on_signals,
+    stopped,
     zenoh_config_option,
 )
 from toploc.nodes.sim_truth import SimTruthNode
@@ -42,7 +44,14 @@ def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
 
 
 @click.command("p2os")
-@click.option("--world", type=click.Choice(WORLD_NAMES), default="building", show_default=True)
+@long_running
+@click.option(
+    "--world",
+    type=click.Choice(WORLD_NAMES),
+    default="building",
+    show_default=True,
+    help="The rendered world the base drives in (its walls stop it).",
+)
 @click.option("--room", default="office_b", show_default=True, help="Where the base starts.")
 @click.option("--seed", type=int, default=1, show_default=True, help="Seeds the start pose.")
 @click.option(
@@ -59,8 +68,20 @@ def simulator_faults(names: tuple[str, ...], every: int) -> SimFaults:
     help="Inject a fault (repeatable): garbage bytes, truncated or bad-checksum SIPs (every "
     "--fault-every-th SIP), or a mute handshake.",
 )
-@click.option("--fault-every", type=click.IntRange(min=1), default=10, show_default=True)
-@click.option("--time-scale", type=click.FloatRange(min=0.1, max=20), default=1.0)
+@click.option(
+    "--fault-every",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="How often a --fault of garbage, truncated or checksum strikes: every N-th SIP.",
+)
+@click.option(
+    "--time-scale",
+    type=click.FloatRange(min=0.1, max=20),
+    default=1.0,
+    show_default=True,
+    help="Simulated seconds per wall-clock second (2: the base moves twice as fast).",
+)
 @click.option(
     "--model",
     type=click.Choice(sorted(MODEL_FACTORS), case_sensitive=False),
@@ -130,4 +151,4 @@ def p2os(
                 stack.enter_context(SimTruthNode(session, robot_id, sim, seed=seed))
                 click.echo(f"true pose on toploc/{robot_id}/sim/true_pose (simulation only)")
         stop.wait()
-    click.echo("stopped")
+    stopped(stop)

@@ -1,0 +1,70 @@
+"""The belief as the command line prints it: one formatter for ``toploc belief``, ``toploc
+localize`` and ``toploc demo`` (``--json`` prints the bus message itself, unchanged).
+
+Pure: text from a belief message (:meth:`localizer.belief.RoomBelief.to_json`). A lost belief
+names no room as its answer: the latest frame matched no place of the map well enough, so the
+room the filter puts first (at whatever probability) is not one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+BAR_WIDTH = 40
+"""Characters of a probability bar at p = 1."""
+
+
+def ranked_rooms(belief: Mapping[str, Any]) -> list[tuple[str, float]]:
+    """``(room, probability)`` from the most likely; ties by name."""
+    return sorted(belief["rooms"].items(), key=lambda item: (-item[1], item[0]))
+
+
+def state_line(belief: Mapping[str, Any], top: int = 3) -> str:
+    """The belief in one line, its answer first:
+
+    - ``localized in office_b (p 0.997)``
+    - ``ambiguous: office_b 0.620, office_a 0.370, kitchen 0.010`` (the ``top`` rooms; also
+      ``homing: ...`` while the robot drives to tell them apart)
+    - ``lost: no room of the map matches (best office_b, 12 inliers)``
+    """
+    state = belief["state"]
+    if state == "lost":
+        best = belief.get("best_place")
+        where = (
+            "no place matched"
+            if best is None
+            else f"best {best['room']}, {best['inliers']} inliers"
+        )
+        return f"lost: no room of the map matches ({where})"
+    ranked = ranked_rooms(belief)
+    if state == "localized" and ranked:
+        room, probability = ranked[0]
+        return f"localized in {room} (p {probability:.3f})"
+    rooms = ", ".join(f"{room} {p:.3f}" for room, p in ranked[:top])
+    return f"{state}: {rooms or 'no rooms'}"
+
+
+def format_belief(belief: Mapping[str, Any], top: int | None = None) -> str:
+    """Several lines: :func:`state_line`, entropy and stamp, the best place, then the rooms by
+    probability with a bar each (the ``top`` first; all if None). A lost belief lists no
+    rooms: it is not an answer."""
+    best = belief["best_place"]
+    best_text = (
+        "none"
+        if best is None
+        else f"place {best['place_id']} in {best['room']} ({best['inliers']} inliers)"
+    )
+    lines = [
+        state_line(belief),
+        f"entropy {belief['entropy_bits']:.3f} bits   stamp {belief['stamp']:.3f} s",
+        f"best place: {best_text}",
+    ]
+    if belief["state"] == "lost":
+        return "\n".join(lines)
+    rooms = ranked_rooms(belief)[:top]
+    width = max((len(room) for room, _ in rooms), default=0)
+    lines += [
+        f"  {room:<{width}}  {p:6.3f}  {'#' * round(BAR_WIDTH * p)}".rstrip() for room, p in rooms
+    ]
+    return "\n".join(lines)
