@@ -31,6 +31,7 @@ map, a lock) becomes an error reply and nothing is written.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -49,6 +50,7 @@ from toploc.limits import Limits
 from toploc.nodes.node import Client, Node
 
 NODE_NAME = "mapdb"
+_log = logging.getLogger(__name__)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 ADD_TIMEOUT_S = 60.0
 """How long :meth:`MapClient.add` waits: sending a large PNG and extracting its features."""
@@ -231,6 +233,11 @@ class MapNode(Node):
                 _check_same_place(where, map_db.place(place_id), place)
         if new:
             self._changed("add")
+        _log.info(
+            "map add: place %d in room %s (%s; features %s)", place_id, place.room,
+            "new" if new else "already in the map",
+            ", ".join(f"{f.detector} {f.n}" for f in fingerprints),
+        )  # fmt: skip
         reply = {
             "place_id": place_id,
             "room": place.room,  # the stored one: a repeat must name the same room
@@ -271,6 +278,7 @@ class MapNode(Node):
                 ) from None
         if added:
             self._changed("connect")
+            _log.info("map connect: %s -- %s", request["room_a"], request["room_b"])
         reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
         return bus.Reply(bus.encode("connected", reply))
 
