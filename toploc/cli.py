@@ -6,6 +6,9 @@ Errors: a command reports what the user can fix as ``Error: <message>`` (a
 --debug <command>`` lets it through with its traceback. SIGTERM is handled like Ctrl-C
 (``KeyboardInterrupt``: cleanup runs, exit status 130), unless a command installs its own
 handler (``serve`` and ``node`` do).
+
+Logging (:mod:`toploc.logs`): ``-v`` (repeatable) and ``--log-level`` on the group, before the
+command (``toploc -v serve``, ``toploc --log-level debug node map ...``), to stderr.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from toploc import __version__
 from toploc.commands.belief import belief
 from toploc.commands.dataset import dataset
 from toploc.commands.demo import demo
+from toploc.commands.drive import drive
 from toploc.commands.eval import eval_group
 from toploc.commands.localize import localize
 from toploc.commands.map import map_group
@@ -29,6 +33,7 @@ from toploc.commands.node import node_group
 from toploc.commands.serve import serve
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
+from toploc.logs import LEVELS, chosen_level, configure_logging
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT, what shells report for Ctrl-C
 
@@ -72,10 +77,26 @@ class ToplocGroup(click.Group):
 @click.group(cls=ToplocGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="toploc")
 @click.option("--debug", is_flag=True, help="Show the traceback of an unexpected error.")
+@click.option(
+    "-v",
+    "--verbose",
+    count=True,
+    help="Log more on stderr: one step per -v from the command's default level (WARNING; "
+    "INFO for serve and node), INFO then DEBUG.",
+)
+@click.option(
+    "--log-level",
+    type=click.Choice(LEVELS, case_sensitive=False),
+    default=None,
+    envvar="TOPLOC_LOG_LEVEL",
+    help="Log at this level on stderr (wins over -v). [default: WARNING; INFO for serve and "
+    "node] [env: TOPLOC_LOG_LEVEL]",
+)
 @click.pass_context
-def main(ctx: click.Context, debug: bool) -> None:
+def main(ctx: click.Context, debug: bool, verbose: int, log_level: str | None) -> None:
     """toploc: which room is the robot in, and where should it drive to find out."""
     ctx.obj = {"debug": debug}
+    configure_logging(chosen_level(ctx.invoked_subcommand, verbose, log_level))
 
 
 def run() -> None:
@@ -92,6 +113,7 @@ main.add_command(map_group)
 main.add_command(eval_group)
 main.add_command(sim_group)
 main.add_command(belief)
+main.add_command(drive)
 main.add_command(localize)
 main.add_command(demo)
 main.add_command(serve)

@@ -185,6 +185,7 @@ class LocalizationRunner:
         """
         localizer = self.localizer  # NoPlacesYetError at once, not after waiting
         self._wait_for_turn(deadline_s)
+        start_s = time.monotonic()
         try:
             localizer = self.localizer  # replaced while this one waited
             if active:
@@ -201,6 +202,7 @@ class LocalizationRunner:
                 observation = localizer.observe(self.robot.capture().image)
                 belief = localizer.update(observation)
             self._set(belief)
+            _log_localization(active, belief, time.monotonic() - start_s)
             return self.belief()
         finally:
             self._run_lock.release()
@@ -265,3 +267,18 @@ class LocalizationRunner:
         finally:
             self._run_lock.release()
         return self.belief()
+
+
+def _log_localization(active: bool, belief: RoomBelief, elapsed_s: float) -> None:
+    """One INFO line per localization: its kind, state, top room and probability, the best
+    place's inliers and how long it took (milliseconds, from its turn to its belief)."""
+    room, probability = belief.top
+    _log.info(
+        "localization (%s): %s, top %s %.3f, %s inliers, %.0f ms",
+        "active" if active else "passive",
+        belief.state,
+        room,
+        probability,
+        belief.best_place_inliers or 0,
+        1000 * elapsed_s,
+    )

@@ -85,6 +85,7 @@ class MapRefresher:
         self.detector = detector
         self.settle_s = settle_s
         self.recalibrate = recalibrate
+        self.reloads = 0  # maps swapped in so far (the version the log names)
         self._lock = threading.Lock()
         self._changes = 0
         self._done = 0
@@ -150,9 +151,14 @@ class MapRefresher:
 
     def _refresh(self) -> None:
         detector = params_from_preset(self.detector).detector
-        if not self.runner.replace_map(load_map(self.db_path, self.detector)):
+        loaded = load_map(self.db_path, self.detector)
+        if not self.runner.replace_map(loaded):
             return
-        _log.info("map %s reloaded", self.db_path)
+        self.reloads += 1
+        _log.info(
+            "map %s reloaded (version %d since start): %d places, %d rooms", self.db_path,
+            self.reloads, len(loaded.places), len(loaded.rooms),
+        )  # fmt: skip
         if not self.recalibrate:
             return
         with MapDatabase.open(self.db_path, create=False, readonly=True) as map_db:
@@ -160,8 +166,12 @@ class MapRefresher:
         for name in held:
             if self._stop.is_set():
                 return
+            start_s = time.monotonic()
             calibrate_map(self.db_path, name)
-            _log.info("map %s: %s likelihood re-calibrated", self.db_path, name)
+            _log.info(
+                "map %s: %s likelihood re-calibrated in %.1f s", self.db_path, name,
+                time.monotonic() - start_s,
+            )  # fmt: skip
             if name == detector:
                 self.runner.replace_map(load_map(self.db_path, self.detector))
 

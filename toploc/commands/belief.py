@@ -30,6 +30,13 @@ from toploc.commands.options import robot_id_option, service_endpoint_option, ze
 @click.option("--reset", is_flag=True, help="Reset to a uniform belief first.")
 @click.option("--json", "as_json", is_flag=True, help="Print the belief as JSON.")
 @click.option(
+    "--watch",
+    is_flag=True,
+    help="Show the belief as it changes until Ctrl-C: a bar per room, the state, the stamp and "
+    "an active localization's drives (redrawn on a terminal; one block per belief when piped, "
+    "one JSON line with --json). With --localize/--active: until that localization ends.",
+)
+@click.option(
     "--timeout",
     "timeout_s",
     type=click.FloatRange(min=0, min_open=True),
@@ -45,11 +52,17 @@ def belief(
     active: bool,
     reset: bool,
     as_json: bool,
+    watch: bool,
     timeout_s: float,
 ) -> None:
     """Print the belief of a running toploc service: probability per room, state, best place."""
     from toploc.nodes.localizer import LOCALIZE_TIMEOUT_S, LocalizerClient
 
+    if watch:
+        from toploc.commands.belief_watch import watch_belief
+
+        watch_belief(robot_id, zenoh_file, endpoints, timeout_s, localize, active, reset, as_json)
+        return
     try:
         cfg = client_bus_config(robot_id, zenoh_file, endpoints or None)
     except bus.ZenohConfigError as error:

@@ -20,6 +20,7 @@ from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.p2os_base import P2osError
 from toploc.bus import BusConfig, BusError
+from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
     StopSignal,
     camera_option,
@@ -46,6 +47,7 @@ from toploc.service import MapRefresher, start_service
 
 
 @click.command("serve")
+@config_file_option
 @long_running
 @db_option(
     "The map; it may have no places yet (record them with toploc map record). Default: "
@@ -106,7 +108,23 @@ def serve(
     source: str,
     limits_path: Path | None,
 ) -> None:
-    """Serve localization for one robot on the Zenoh bus until interrupted."""
+    """Serve localization for one robot on the Zenoh bus until interrupted.
+
+    Every option may come from a TOML file instead (--config FILE.toml): one key per option,
+    its name as above without the leading dashes (robot-id, not robot_id); a flag takes true
+    or false, a repeatable option a list of strings; relative paths are relative to the
+    file's folder. Options on the command line win over the file. An unknown key or a value
+    of the wrong type is an error naming the file and the key. For example:
+
+    \b
+        robot-id = "kitchen-bot"
+        db = "kitchen.db"
+        listen = ["tcp/127.0.0.1:7447"]
+        policy = "most-likely"
+        limits = "limits.toml"
+        robot = "p2os:/dev/ttyUSB0"
+        source = "uvc:0"
+    """
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path)
     if no_sim and source != "sim":
         raise click.ClickException(

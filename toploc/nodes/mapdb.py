@@ -32,6 +32,7 @@ map, a lock) becomes an error reply and nothing is written.
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import time
 from dataclasses import asdict
@@ -64,6 +65,7 @@ from toploc.nodes.node import Node
 __all__ = ["ADD_TIMEOUT_S", "NODE_NAME", "MapClient", "MapNode", "subscribe_changes"]
 
 NODE_NAME = "mapdb"
+_log = logging.getLogger(__name__)
 
 
 def _json_safe(fields: dict[str, Any]) -> dict[str, Any]:
@@ -216,6 +218,11 @@ class MapNode(Node):
                 _check_same_place(where, map_db.place(place_id), place)
         if new:
             self._changed("add")
+        _log.info(
+            "map add: place %d in room %s (%s; features %s)", place_id, place.room,
+            "new" if new else "already in the map",
+            ", ".join(f"{f.detector} {f.n}" for f in fingerprints),
+        )  # fmt: skip
         reply = {
             "place_id": place_id,
             "room": place.room,  # the stored one: a repeat must name the same room
@@ -251,5 +258,6 @@ class MapNode(Node):
                 ) from None
         if added:
             self._changed("connect")
+            _log.info("map connect: %s -- %s", request["room_a"], request["room_b"])
         reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
         return bus.Reply(CONNECTED.encode(reply))
