@@ -1,6 +1,6 @@
 """Who may command the robot, and one robot per id, on real Zenoh sessions on 127.0.0.1.
 
-The service and operator configurations are the README's own (section "Security"), with a
+The service and operator configurations are the docs' own (docs/security.md), with a
 dictionary of this test's; users: ``operator`` (may command), ``viewer`` (logged in, may watch),
 ``robot-node`` (a robot base on another machine).
 """
@@ -28,16 +28,15 @@ from toploc.nodes.localizer import LocalizerClient, LocalizerNode
 from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.service import start_service
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+SECURITY_PAGE = Path(__file__).resolve().parents[2] / "docs" / "security.md"
 PASSWORDS = {"operator": "change-me", "viewer": "viewer-secret", "robot-node": "node-secret"}
 ROBOT_ID = "r1"
 
 
-def readme_json5_blocks() -> list[str]:
-    """The ```json5 blocks of the README's Security section, in order."""
-    text = README.read_text(encoding="utf-8")
-    section = text.split("\n## Security\n", 1)[1].split("\n## ", 1)[0]
-    return re.findall(r"```json5\n(.*?)```", section, flags=re.DOTALL)
+def docs_json5_blocks() -> list[str]:
+    """The ```json5 blocks of the docs' Security page, in order."""
+    text = SECURITY_PAGE.read_text(encoding="utf-8")
+    return re.findall(r"```json5\n(.*?)```", text, flags=re.DOTALL)
 
 
 class FakeRobot:
@@ -61,10 +60,10 @@ class FakeRobot:
 
 
 class Files:
-    """The README's service file, a user's file per user, and the same service without ACL."""
+    """The docs' service file, a user's file per user, and the same service without ACL."""
 
     def __init__(self, root: Path) -> None:
-        service, operator = readme_json5_blocks()
+        service, operator = docs_json5_blocks()
         dictionary = root / "credentials.txt"
         dictionary.write_text("".join(f"{u}:{p}\n" for u, p in PASSWORDS.items()))
         self.service = root / "service.json5"
@@ -75,7 +74,7 @@ class Files:
         self.root, self.operator_text = root, operator
 
     def user(self, user: str, password: str | None = None) -> Path:
-        """The README's operator file with ``user`` and ``password`` (its own by default)."""
+        """The docs' operator file with ``user`` and ``password`` (its own by default)."""
         path = self.root / f"{user}.json5"
         text = self.operator_text.replace('user: "operator"', f'user: "{user}"')
         text = text.replace('"change-me"', f'"{password or PASSWORDS.get(user, "none")}"')
@@ -114,8 +113,8 @@ def service(files: Files) -> Iterator[Service]:
     running.close()
 
 
-def test_the_readme_has_a_service_and_an_operator_file():
-    service, operator = readme_json5_blocks()
+def test_the_docs_have_a_service_and_an_operator_file():
+    service, operator = docs_json5_blocks()
     assert "access_control" in service and "dictionary_file" in service
     assert 'user: "operator"' in operator
 

@@ -6,8 +6,8 @@ simulation-only side channel (``sim/true_pose``, ``sim/kidnap``: :mod:`toploc.no
 the pty like a real base and renders its camera at the true pose it receives over Zenoh. The
 map is recorded over the bus by ``toploc map record`` subprocesses while the test drives the base
 with ``base/cmd``; between rooms the base is carried (``sim/kidnap``), since driving through
-the doors is not what is tested. Then the README's client drives it and kidnaps it into the
-look-alike office_b, and ``toploc belief --active`` localizes it from another process. Only
+the doors is not what is tested. Then the docs' client (docs/robot.md) drives it and kidnaps it
+into the look-alike office_b, and ``toploc belief --active`` localizes it from another process. Only
 the pty and Zenoh join the processes; the commands the simulator received are the manual's.
 """
 
@@ -41,7 +41,7 @@ from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.sim_truth import SimTruthNode
 
 REPO = Path(__file__).resolve().parents[2]
-README = REPO / "README.md"
+ROBOT_PAGE = REPO / "docs" / "robot.md"
 WORLD = "building"
 ROUTE = (("office_a", None), ("corridor", "office_a"), ("office_b", "corridor"))
 """The rooms recorded, in order, with the room each one's first panorama connects to."""
@@ -109,7 +109,7 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     # a Zenoh client of the service, as toploc sim p2os --bus is: the service routes queries
-    # from its other clients (the README's) to sim/kidnap
+    # from its other clients (the docs') to sim/kidnap
     config = bus.BusConfig(robot_id, mode="client", listen=(), connect=(endpoint,))
     try:
         gave_up = threading.Timer(30.0, lambda: None)  # serve listens within 30 s
@@ -131,8 +131,8 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
                 assert wait_for(lambda: _reloaded(localizer, recorded_s), 30.0)
                 t2 = time.monotonic()
 
-                exec(compile(_readme_client(robot_id, endpoint), "README.md", "exec"), {})
-                assert truth.publish()["room"] == "office_b"  # the README's drive and kidnap
+                exec(compile(_docs_client(robot_id, endpoint), "docs/robot.md", "exec"), {})
+                assert truth.publish()["room"] == "office_b"  # the docs' drive and kidnap
                 before = len(simulator.commands())
                 done = _toploc("belief", "--active", "--json", *bus_args, timeout_s=240.0)
                 t3 = time.monotonic()
@@ -156,9 +156,9 @@ def test_record_kidnap_and_localize_over_the_pty_and_zenoh(
     )
 
 
-def _readme_client(robot_id: str, endpoint: str) -> str:
-    """The README's Python client of "On a real robot" (drive, then kidnap into office_b)."""
-    section = README.read_text(encoding="utf-8").split("## On a real robot", 1)[1]
+def _docs_client(robot_id: str, endpoint: str) -> str:
+    """The first Python client of the docs' "On a real robot" (drive, then kidnap into office_b)."""
+    section = ROBOT_PAGE.read_text(encoding="utf-8").split("# On a real robot", 1)[1]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     assert "bus.SIM_KIDNAP" in code and '"office_b"' in code
     return code.replace('"tcp/127.0.0.1:7447"', repr(endpoint)).replace('"pioneer"', repr(robot_id))

@@ -231,14 +231,14 @@ def test_a_cancel_during_active_localization_ends_its_driving(building_map):
     assert kidnapped.distance_driven_m < 1.0  # one move at most: no further drive
 
 
-def test_the_readme_homing_example_runs(building_map, capsys):
-    readme = Path(__file__).resolve().parents[2] / "README.md"
-    section = readme.read_text(encoding="utf-8").split("### Homing over the bus", 1)[1]
+def test_the_docs_homing_example_runs(building_map, capsys):
+    page = Path(__file__).resolve().parents[2] / "docs" / "bus.md"
+    section = page.read_text(encoding="utf-8").split("## Homing over the bus", 1)[1]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     with homing_service(building_map[0], near_kitchen_place()) as (service, _client, progress):
         code = code.replace('"tcp/127.0.0.1:7447"', repr(service.config.listen[0]))
         code = code.replace("config.robot_id", repr(ROBOT_ID))
-        exec(compile(code, "README.md", "exec"), {})
+        exec(compile(code, "docs/bus.md", "exec"), {})
         assert wait_for(lambda: bool(progress) and progress[-1]["state"] != "homing")
     out = capsys.readouterr().out.splitlines()
     assert {"arrived", "converged"} & set(out), out  # the reply (progress lines have 4 words)

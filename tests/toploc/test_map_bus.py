@@ -239,14 +239,14 @@ def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates
         refresher.close()
 
 
-def test_the_readme_recording_example_runs(service, tmp_path, monkeypatch, capsys):
+def test_the_docs_recording_example_runs(service, tmp_path, monkeypatch, capsys):
     _, endpoint, _ = service
-    readme = Path(__file__).resolve().parents[2] / "README.md"
-    section = readme.read_text(encoding="utf-8").split("### Recording a map on the robot", 1)[1]
+    page = Path(__file__).resolve().parents[2] / "docs" / "robot.md"
+    section = page.read_text(encoding="utf-8").split("## Recording a map on the robot", 1)[1]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     code = code.replace('"tcp/127.0.0.1:7447"', repr(endpoint))
     code = code.replace("config.robot_id", repr(ROBOT_ID))
     (tmp_path / "kitchen.png").write_bytes(panorama("kitchen", 1.5, 2.5))
     monkeypatch.chdir(tmp_path)
-    exec(compile(code, "README.md", "exec"), {})
+    exec(compile(code, "docs/robot.md", "exec"), {})
     assert int(capsys.readouterr().out.strip()) > 0
