@@ -13,7 +13,7 @@ import zenoh
 from toploc import bus
 from toploc.bus.clients.base import Client
 from toploc.bus.messages import check_belief
-from toploc.bus.schemas import LOCALIZE, RESET
+from toploc.bus.schemas import BELIEF, LOCALIZE, RESET
 
 LOCALIZE_TIMEOUT_S = 300.0
 """How long :meth:`LocalizerClient.localize` waits: an active localization drives the robot."""
@@ -39,7 +39,7 @@ class LocalizerClient(Client):
 
     def _query(self, suffix: str, payload: bytes | None, timeout_s: float) -> dict[str, Any]:
         key_expr = self.key(suffix)
-        message = bus.request_json(self.session, key_expr, {}, payload, timeout_s)
+        message = bus.request_json(self.session, key_expr, BELIEF.fields, payload, timeout_s)
         return check_belief(key_expr, message)
 
     def belief(self) -> dict[str, Any]:
@@ -62,6 +62,6 @@ class LocalizerClient(Client):
         publications are skipped. Undeclare the returned subscriber, or :meth:`close`."""
         return self._subscribe(
             bus.LOCALIZER_BELIEF,
-            lambda key_expr, data: check_belief(key_expr, bus.decode(key_expr, data)),
+            lambda key_expr, data: check_belief(key_expr, BELIEF.decode(key_expr, data, False)),
             callback,
         )
