@@ -187,6 +187,9 @@ def test_the_watchdog_stops_the_robot_when_the_client_falls_silent(world: World)
 def test_the_base_sends_pulses(sim: P2osSimulator) -> None:
     with P2osBase(sim.port, settings=P2osSettings(pulse_s=0.1)):
         time.sleep(0.5)
+    deadline = time.monotonic() + 5.0  # the simulator reads the closing frames on its thread
+    while sim.phase != "sync0" and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert sim.commands().count(Command.PULSE) >= 3
     assert sim.commands()[-3:] == [Command.STOP, Command.ENABLE, Command.CLOSE]
     assert sim.phase == "sync0"

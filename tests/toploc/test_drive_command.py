@@ -11,7 +11,7 @@ import pytest
 from bus_helpers import ROBOT_ID, Bus, free_endpoint
 from click.testing import CliRunner, Result
 
-from localizer.robot_protocol import Capture, MoveResult, Odometry
+from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from toploc.cli import main
 from toploc.limits import Limits
 from toploc.nodes.robot import RobotNode
@@ -42,8 +42,8 @@ class WalledRobot:
         self.x_m += moved_m
         return MoveResult(turn_rad, moved_m, bumped=moved_m < forward_m)
 
-    def odometry(self) -> Odometry:
-        return Odometry(self.x_m, 0.0, self.heading_rad)
+    def odometry(self) -> Pose2D:
+        return Pose2D(self.x_m, 0.0, self.heading_rad)
 
     def stop(self) -> None:
         self.stops += 1

@@ -9,6 +9,7 @@ import re
 import shutil
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -200,6 +201,15 @@ def test_the_built_in_map_is_never_written_over_the_bus(building_map, tmp_path):
     assert n_places(db_path) == before
 
 
+@dataclass(frozen=True)
+class FakeMap:
+    """What the refresher reads of a loaded map (it logs the counts)."""
+
+    label: str
+    places: tuple[object, ...] = ()
+    rooms: tuple[str, ...] = ()
+
+
 class FakeRunner:
     def __init__(self) -> None:
         self.maps: list[object] = []
@@ -215,7 +225,9 @@ def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates
     from toploc import service as service_module
 
     calls: list[str] = []
-    monkeypatch.setattr(service_module, "load_map", lambda path, detector: f"map {len(calls)}")
+    monkeypatch.setattr(
+        service_module, "load_map", lambda path, detector: FakeMap(f"map {len(calls)}")
+    )
     monkeypatch.setattr(service_module, "calibrate_map", lambda path, d: calls.append(d))
     runner = FakeRunner()
     refresher = service_module.MapRefresher(
@@ -232,7 +244,8 @@ def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates
         assert runner.maps == []
         assert refresher.wait_idle(5)
         assert calls == ["sift"]  # the map's one detector, once
-        assert runner.maps == ["map 0", "map 1"]  # the new places, then the new likelihood
+        labels = [m.label for m in runner.maps]  # type: ignore[attr-defined]
+        assert labels == ["map 0", "map 1"]  # the new places, then the new likelihood
         refresher.changed()
         assert refresher.wait_idle(5) and calls == ["sift", "sift"]
     finally:
