@@ -7,8 +7,9 @@ at ``theta + rotation_rad`` here (``rotation_rad = heading_home - heading_here``
 directions are returned in the current robot frame, in radians; NaN where a view gives none.
 Descriptor matches come in as index pairs ``[here_row, home_row]``.
 
-Pure numpy: the runtime homing (:mod:`localizer.visual_homing`) and its evaluation on images
-(:mod:`homing.thesis.evaluation`, ``toploc eval homing``) share these.
+Pure numpy. The homing runtime (:mod:`localizer.visual_homing`) steers by them, and ``toploc
+eval homing`` (:mod:`toploc.evaluation.homing`) measures them against the truth with the
+statistics of :mod:`homing.thesis.evaluation`.
 """
 
 from __future__ import annotations
