@@ -63,22 +63,31 @@ def module_of(frame: FrameType) -> str | None:
     return name if name.split(".")[0] in PACKAGES else None
 
 
-def traced_modules(run: Callable[[], Any]) -> list[str]:
-    """The module of each Python call event into toploc's packages while ``run()`` runs."""
+CAMERA_MODELS = ("Cylinder", "Equirect")
+
+
+def traced_modules(run: Callable[[], Any]) -> tuple[list[str], int]:
+    """The module of each Python call event into toploc's packages while ``run()`` runs, and
+    how many camera models were built (``__post_init__`` of a ``Cylinder`` or ``Equirect``)."""
     calls: list[str] = []
+    cameras = 0
 
     def profile(frame: FrameType, event: str, _arg: object) -> None:
+        nonlocal cameras
         if event == "call":
             module = module_of(frame)
             if module is not None:
                 calls.append(module)
+                own = frame.f_locals.get("self")
+                if frame.f_code.co_name == "__post_init__" and type(own).__name__ in CAMERA_MODELS:
+                    cameras += 1
 
     sys.setprofile(profile)
     try:
         run()
     finally:
         sys.setprofile(None)
-    return calls
+    return calls, cameras
 
 
 def visits(calls: list[str]) -> Counter[str]:
@@ -114,7 +123,7 @@ def main() -> None:
             localizer.localize_once(read_panorama(image))
 
         path()  # once untraced: every lazy import done, every cache warm
-        calls = traced_modules(path)
+        calls, cameras = traced_modules(path)
     runs = visits(calls)
     per_module = Counter(calls)
     import localizer
@@ -123,7 +132,8 @@ def main() -> None:
     print(
         f"{len(runs)} modules, {sum(runs.values())} visits, "
         f"{sum(1 for n in runs.values() if n > 1)} modules visited more than once, "
-        f"{sum(n - 1 for n in runs.values())} re-entries; {len(calls)} calls"
+        f"{sum(n - 1 for n in runs.values())} re-entries; {len(calls)} calls; "
+        f"{cameras} camera models built"
     )
     print(f"{'module':32s} {'visits':>6s} {'calls':>6s}")
     for module, n in sorted(runs.items(), key=lambda item: (-item[1], item[0])):

@@ -161,6 +161,15 @@ def test_a_bad_add_gets_an_error_naming_it_and_leaves_the_map_unchanged(
     assert n_places(db_path) == before
 
 
+def test_an_add_of_a_pinhole_photo_is_refused_as_no_360_panorama(service, client):
+    _, _, db_path = service
+    before = n_places(db_path)
+    crop = robot_in("kitchen", 1.0, 1.0).capture().image[:, 100:228]  # 128 x 96: 4:3
+    with pytest.raises(bus.BusReplyError, match=r"128x96 px \(1.33:1\) is not a 360° panorama"):
+        client.add(encode_png(crop), "kitchen")
+    assert n_places(db_path) == before
+
+
 def test_a_read_only_map_refuses_the_add_clearly(service, client, monkeypatch):
     _, _, db_path = service
     before = n_places(db_path)
