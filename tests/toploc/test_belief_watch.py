@@ -72,8 +72,8 @@ def test_a_block_shows_state_bars_best_place_and_the_drive():
         "  office_b  ████████████████░░░░  0.810",
         "  lab       ████░░░░░░░░░░░░░░░░  0.190",
         "best place: 4 in office_b (37 inliers)",
-        "drive to place 4: step 3, moved 1.20 m, 40/310 features matched, home vector 0.31, "
-        "parallax 4.2 deg (homing)",
+        "drive to place 4: step 3, moved 1.20 m, 40/310 matched, home 0.31, parallax 4.2 deg "
+        "(homing)",
     ]
 
 

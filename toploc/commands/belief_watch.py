@@ -83,15 +83,18 @@ def render_watch(
 
 def describe_drive(progress: dict[str, Any]) -> str:
     """One line of a ``homing/progress`` message: ``drive to place 4: step 3, moved 1.20 m,
-    40/310 features matched, home vector 0.31, parallax 4.2 deg (homing)``."""
+    40/310 matched, home 0.31, parallax 4.2 deg (homing)``: moves made, odometric metres,
+    features the home vector used of those seen, the home vector's length (ALV units) and
+    the matches' median parallax; the state ``homing`` (or ``lost``) while it drives, then
+    how it ended (``last drive ... (arrived)``)."""
     state = progress.get("state", "homing")
     label = "drive" if state in DRIVING else "last drive"
     parts = [f"step {progress.get('step', 0)}"]
     if isinstance(progress.get("moved_m"), int | float):
         parts.append(f"moved {progress['moved_m']:.2f} m")
-    parts.append(f"{progress.get('matched', 0)}/{progress.get('features', 0)} features matched")
+    parts.append(f"{progress.get('matched', 0)}/{progress.get('features', 0)} matched")
     if isinstance(progress.get("home_length"), int | float):
-        parts.append(f"home vector {progress['home_length']:.2f}")
+        parts.append(f"home {progress['home_length']:.2f}")
     if isinstance(progress.get("parallax_deg"), int | float):
         parts.append(f"parallax {progress['parallax_deg']:.1f} deg")
     return f"{label} to place {progress['place_id']}: {', '.join(parts)} ({state})"
