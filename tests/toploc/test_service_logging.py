@@ -128,3 +128,22 @@ def test_an_unknown_log_level_is_refused():
     done = CliRunner().invoke(main, ["--log-level", "chatty", "belief"])
     assert done.exit_code == 2
     assert "'chatty' is not one of" in done.output
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        ([], logging.WARNING),
+        (["-v"], logging.INFO),
+        (["-vv"], logging.DEBUG),
+        (["--log-level", "error", "-v"], logging.ERROR),
+    ],
+)
+def test_the_group_sets_the_level_of_the_command_it_runs(args, expected):
+    try:
+        done = CliRunner().invoke(main, [*args, "drive", "--connect", free_endpoint(), "--stop",
+                                         "--timeout", "0.2"])  # fmt: skip
+        assert done.exit_code == 1  # nothing answers; the level is set before the command runs
+        assert logging.getLogger("toploc").level == expected
+    finally:
+        configure_logging(logging.WARNING)
