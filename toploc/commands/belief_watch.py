@@ -21,13 +21,17 @@ import shutil
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, TextIO
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 import zenoh
 
 from toploc import bus
 from toploc.commands.bus_client import client_session
+
+if TYPE_CHECKING:  # imported when the watch runs (the node modules load more than click needs)
+    from toploc.nodes.localizer import LocalizerClient
 
 _log = logging.getLogger(__name__)
 BAR_CELLS = 20
@@ -143,7 +147,7 @@ shown) or ``("done", belief | exception)`` (the localization asked for ended).""
 
 def watch_belief(
     robot_id: str,
-    zenoh_file: Any,
+    zenoh_file: Path | None,
     endpoints: tuple[str, ...],
     timeout_s: float,
     localize: bool = False,
@@ -219,7 +223,9 @@ def _subscribe_in_order(
     return session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample, indirect=False))
 
 
-def _first_belief(localizer: Any, reset: bool) -> tuple[dict[str, Any] | None, str | None]:
+def _first_belief(
+    localizer: LocalizerClient, reset: bool
+) -> tuple[dict[str, Any] | None, str | None]:
     """The belief to show first (after a reset if asked), or why there is none yet (the
     service answered with an error, e.g. its map has no places yet); BusTimeout if no
     service answers."""
