@@ -266,6 +266,7 @@ class LocalizationRunner:
             self._set(self.localizer.reset(prior))
         finally:
             self._run_lock.release()
+        _log.info("belief reset to %s", "uniform" if prior is None else f"the prior {dict(prior)}")
         return self.belief()
 
 

@@ -24,6 +24,7 @@ from toploc import bus
 from toploc.cli import main
 from toploc.commands.belief_watch import ASCII_BLOCKS, Screen, render_watch
 from toploc.nodes.localizer import LocalizerNode
+from toploc.runner import NoPlacesYetError
 
 REPO = Path(__file__).resolve().parents[2]
 STAMP = 1764615296.25
@@ -72,8 +73,8 @@ def test_a_block_shows_state_bars_best_place_and_the_drive():
         "  office_b  ████████████████░░░░  0.810",
         "  lab       ████░░░░░░░░░░░░░░░░  0.190",
         "best place: 4 in office_b (37 inliers)",
-        "drive to place 4: step 3, moved 1.20 m, 40/310 features matched, home vector 0.31, "
-        "parallax 4.2 deg (homing)",
+        "drive to place 4: step 3, moved 1.20 m, 40/310 matched, home 0.31, parallax 4.2 deg "
+        "(homing)",
     ]
 
 
@@ -213,3 +214,26 @@ def test_watch_shows_each_new_belief_until_ctrl_c(driving):
     finally:
         if process.poll() is None:
             process.kill()
+
+
+class EmptyMapService(DrivingService):
+    """A service whose map has no places yet, until its first localization."""
+
+    def belief(self) -> dict:
+        raise NoPlacesYetError("the map has no places yet: record some first")
+
+    def localize(self, active: bool, deadline_s: float | None = None) -> dict:
+        return belief({"kitchen": 1.0}, "localized", STAMP + 3)
+
+
+def test_watch_says_why_there_is_no_belief_yet_and_goes_on(zbus):
+    with LocalizerNode(zbus.server, ROBOT_ID, EmptyMapService(None)):
+        zbus.wait_alive("localizer")
+        done = watch(zbus.endpoint, "--localize")
+    assert done.exit_code == 0, done.output
+    first, last = done.stdout.split("\n\n")
+    assert first == (
+        f"no belief yet: toploc/{ROBOT_ID}/localizer/belief: NoPlacesYetError: the map has no "
+        "places yet: record some first"
+    )
+    assert last.startswith("state: localized") and "  kitchen  ████████████████████  1.000" in last

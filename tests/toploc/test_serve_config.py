@@ -171,3 +171,15 @@ def test_serve_runs_from_a_file_and_logs_a_map_add_at_info(tmp_path):
         service.stop()
     with MapDatabase.open(tmp_path / "new.db", readonly=True) as map_db:
         assert [place.room for place in map_db.places()] == ["kitchen"]
+
+
+def test_the_example_in_the_help_is_a_valid_config(tmp_path):
+    assert serve.help is not None
+    example = serve.help.split("\b\n", 1)[1]
+    (tmp_path / "limits.toml").write_text("max_forward_m = 1.0\n")
+    params = options("--config", str(write(tmp_path, "\n".join(
+        line.strip() for line in example.splitlines()
+    ))))  # fmt: skip
+    assert (params["robot_id"], params["policy"], params["source"]) == (
+        "kitchen-bot", "most-likely", "uvc:0",
+    )  # fmt: skip

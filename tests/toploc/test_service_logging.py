@@ -64,7 +64,9 @@ def test_map_adds_the_reloads_they_bring_and_a_localization_are_logged(tmp_path,
             for a, (room, _, _) in zip(added, PLACES, strict=True)
         ]
         assert service.refresher.wait_idle(60)
-        belief = LocalizerClient(session, ROBOT_ID, timeout_s=30.0).localize(active=False)
+        localizer = LocalizerClient(session, ROBOT_ID, timeout_s=30.0)
+        belief = localizer.localize(active=False)
+        localizer.reset({"seminar": 1.0})
     reloads = [m for m in messages(caplog, "toploc.service") if " reloaded " in m]
     assert reloads[-1] == (
         f"map {db_path} reloaded (version {len(reloads)} since start): {len(PLACES)} places, "
@@ -76,7 +78,8 @@ def test_map_adds_the_reloads_they_bring_and_a_localization_are_logged(tmp_path,
                      r"\d+\.\d s", m)
         for m in calibrations
     ), calibrations  # fmt: skip
-    (localized,) = messages(caplog, "toploc.runner")
+    localized, reset = messages(caplog, "toploc.runner")
+    assert reset == "belief reset to the prior {'seminar': 1.0}"
     top = belief["top"]
     assert re.fullmatch(
         rf"localization \(passive\): {belief['state']}, top {top['room']} "
@@ -125,3 +128,22 @@ def test_an_unknown_log_level_is_refused():
     done = CliRunner().invoke(main, ["--log-level", "chatty", "belief"])
     assert done.exit_code == 2
     assert "'chatty' is not one of" in done.output
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        ([], logging.WARNING),
+        (["-v"], logging.INFO),
+        (["-vv"], logging.DEBUG),
+        (["--log-level", "error", "-v"], logging.ERROR),
+    ],
+)
+def test_the_group_sets_the_level_of_the_command_it_runs(args, expected):
+    try:
+        done = CliRunner().invoke(main, [*args, "drive", "--connect", free_endpoint(), "--stop",
+                                         "--timeout", "0.2"])  # fmt: skip
+        assert done.exit_code == 1  # nothing answers; the level is set before the command runs
+        assert logging.getLogger("toploc").level == expected
+    finally:
+        configure_logging(logging.WARNING)

@@ -21,13 +21,17 @@ import shutil
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, TextIO
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
 
 import click
 import zenoh
 
 from toploc import bus
 from toploc.commands.bus_client import client_session
+
+if TYPE_CHECKING:  # imported when the watch runs (the node modules load more than click needs)
+    from toploc.nodes.localizer import LocalizerClient
 
 _log = logging.getLogger(__name__)
 BAR_CELLS = 20
@@ -83,15 +87,18 @@ def render_watch(
 
 def describe_drive(progress: dict[str, Any]) -> str:
     """One line of a ``homing/progress`` message: ``drive to place 4: step 3, moved 1.20 m,
-    40/310 features matched, home vector 0.31, parallax 4.2 deg (homing)``."""
+    40/310 matched, home 0.31, parallax 4.2 deg (homing)``: moves made, odometric metres,
+    features the home vector used of those seen, the home vector's length (ALV units) and
+    the matches' median parallax; the state ``homing`` (or ``lost``) while it drives, then
+    how it ended (``last drive ... (arrived)``)."""
     state = progress.get("state", "homing")
     label = "drive" if state in DRIVING else "last drive"
     parts = [f"step {progress.get('step', 0)}"]
     if isinstance(progress.get("moved_m"), int | float):
         parts.append(f"moved {progress['moved_m']:.2f} m")
-    parts.append(f"{progress.get('matched', 0)}/{progress.get('features', 0)} features matched")
+    parts.append(f"{progress.get('matched', 0)}/{progress.get('features', 0)} matched")
     if isinstance(progress.get("home_length"), int | float):
-        parts.append(f"home vector {progress['home_length']:.2f}")
+        parts.append(f"home {progress['home_length']:.2f}")
     if isinstance(progress.get("parallax_deg"), int | float):
         parts.append(f"parallax {progress['parallax_deg']:.1f} deg")
     return f"{label} to place {progress['place_id']}: {', '.join(parts)} ({state})"
@@ -140,7 +147,7 @@ shown) or ``("done", belief | exception)`` (the localization asked for ended).""
 
 def watch_belief(
     robot_id: str,
-    zenoh_file: Any,
+    zenoh_file: Path | None,
     endpoints: tuple[str, ...],
     timeout_s: float,
     localize: bool = False,
@@ -216,7 +223,9 @@ def _subscribe_in_order(
     return session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample, indirect=False))
 
 
-def _first_belief(localizer: Any, reset: bool) -> tuple[dict[str, Any] | None, str | None]:
+def _first_belief(
+    localizer: LocalizerClient, reset: bool
+) -> tuple[dict[str, Any] | None, str | None]:
     """The belief to show first (after a reset if asked), or why there is none yet (the
     service answered with an error, e.g. its map has no places yet); BusTimeout if no
     service answers."""

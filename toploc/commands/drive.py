@@ -85,7 +85,15 @@ def drive(
     stop: bool,
     timeout_s: float,
 ) -> None:
-    """Drive the base of a running toploc service: turn, then go forward; or --stop."""
+    """Drive the base of a running toploc service: turn, then go forward; or --stop.
+
+    One move (base/cmd): turn --turn-deg degrees (counter-clockwise positive), then drive
+    --forward-m metres (negative: backwards); it waits until the base has done it and prints
+    what the base did and its odometry. Exit status 1 with a one-line error when the base
+    bumps into something (after that line), refuses the move (beyond the service's --limits),
+    or the service stops it (its move timeout), or no service answers (a drive that gives up
+    waiting sends base/stop first).
+    """
     from toploc.nodes.robot import RemoteRobot
 
     if stop and (turn_deg is not None or forward_m is not None):

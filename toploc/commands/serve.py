@@ -113,8 +113,9 @@ def serve(
     Every option may come from a TOML file instead (--config FILE.toml): one key per option,
     its name as above without the leading dashes (robot-id, not robot_id); a flag takes true
     or false, a repeatable option a list of strings; relative paths are relative to the
-    file's folder. Options on the command line win over the file. An unknown key or a value
-    of the wrong type is an error naming the file and the key. For example:
+    file's folder. Options on the command line (and TOPLOC_ZENOH_CONFIG) win over the file.
+    An unknown key or a value of the wrong type is an error naming the file and the key.
+    For example:
 
     \b
         robot-id = "kitchen-bot"

@@ -182,6 +182,8 @@ class LocalizerNode(Node):
             active = request.get("active", False)
             if "timeout_s" in request:
                 deadline_s = received_s + request["timeout_s"]
+        _log.debug("localize request: active %s, deadline in %s s", active,
+                   None if deadline_s is None else round(deadline_s - received_s, 1))  # fmt: skip
         return self._belief_reply(self.service.localize(active, deadline_s), publish=True)
 
     def _on_reset(self, payload: bytes | None) -> bus.Reply:
