@@ -181,7 +181,7 @@ class StateThresholds:
       1024 px, rendered at 2048 px and read at 1024 or at 2048, and with other textures
       (``--seed 11``). No wrong answer reached 20 there, and none reached 10 on maps with
       several places per room (the dense house maps, the photo rooms, the building's queries;
-      its leave-one-out of twin offices is wrong by construction). README, "Results".
+      its leave-one-out of twin offices is wrong by construction). docs/results.md.
     - ``max_entropy_bits = 1.0``: and the belief is concentrated (e.g. 0.9 on one room and the
       rest over four others is 0.67 bits; a 50/50 split is 1 bit, which is never localized
       anyway because its ratio is 1).
@@ -243,7 +243,7 @@ class RoomBelief:
 
     ``best_place_id`` / ``best_place_room`` / ``best_place_inliers``: the best-matching place of
     the latest frame, if the caller knows it. ``stamp_s``: seconds (caller's clock), optional.
-    :meth:`to_json` / :meth:`from_json` are the one JSON form of a belief (README, "Belief").
+    :meth:`to_json` / :meth:`from_json` are the one JSON form of a belief (docs/bus.md).
     """
 
     rooms: tuple[str, ...]

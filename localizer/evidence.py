@@ -46,7 +46,7 @@ def azimuth_coverage(rays: np.ndarray, arc_deg: float = COVERAGE_ARC_DEG) -> flo
     On the rendered house with one place per room, weighting the inliers by it took the
     confidently wrong answers of 50 queries off the map's places from 3 to 0 (doorway views:
     65 inliers through a bedroom's door against its own room's 16) and top-1 from 68 to 72 %
-    (README, "Results").
+    (docs/results.md).
     """
     if not 0.0 < arc_deg <= 360.0:
         raise ValueError(f"arc_deg must be in (0, 360], got {arc_deg}")

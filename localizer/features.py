@@ -30,7 +30,7 @@ keypoints, image size and camera are those of the shrunk image.
 Contrast: the image is equalised by CLAHE (``cv2.createCLAHE``; clip limit ``clahe_clip_limit``)
 in full-width horizontal bands ``clahe_band_deg`` tall before detection. SIFT's contrast
 threshold is absolute, so a dim room gave a seventh of the keypoints of the same room lit, and
-dim queries against a lit map were lost; equalised, they localize (README, "Localization"). A
+dim queries against a lit map were lost; equalised, they localize (docs/localization.md). A
 fingerprint recorded without ``clahe_clip_limit`` (a map written before this step) was not
 equalised: :func:`matching_overrides` tells a query to match it.
 
@@ -80,7 +80,7 @@ class ExtractionParams:
     ``max_keypoints``: keep at most this many after filtering, the strongest (None: no limit).
     1,000 by default: equalised, a textured room gives 1,100-2,300 keypoints, and matching grows
     with the product of two panoramas' counts; the strongest 1,000 kept the photo rooms' and the
-    house's outcomes at 180 instead of 245 ms per query (README, "Localization"); a bare or dim
+    house's outcomes at 180 instead of 245 ms per query (docs/localization.md); a bare or dim
     room has fewer and mostly keeps all of its.
     ``wrap_margin_px``: columns of circular padding on each side for the 360° wrap-around.
     ``clahe_clip_limit``: CLAHE's clip limit (0: the image as given); ``clahe_band_deg``: the

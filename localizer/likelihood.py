@@ -123,7 +123,7 @@ class RatioLikelihood:
     ``planar``; the calibration picks the one that separates the map's rooms better).
     ``min_inliers``: below this best count the frame is flat and ``lost``. ``max_log_ratio``:
     the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
-    of the counts; empty for the defaults), for ``toploc map info`` and the README.
+    of the counts; empty for the defaults), for ``toploc map info`` and the docs.
     ``count``: what is counted of each place (:data:`COUNTS`); a model stored before the
     coverage existed reads ``inliers``.
 
@@ -136,7 +136,7 @@ class RatioLikelihood:
     much of it. The old softmax's 1/15 made two confident mistakes on a house map with one
     place per room (a bedroom query won by the living room, 22 inliers against 7); 1/30 made
     none there, and in the look-alike offices it ended 11 of 12 kidnappings localized, against
-    6 of 12 with 1/15 (README, "Results").
+    6 of 12 with 1/15 (docs/results.md).
     They were kept for the ``spread`` count: on the dense house its same-room and other-room
     counts barely overlap, so a refit follows whatever prior it starts from (-4.4 + 1.17 log +
     0.020 n from these, flatter again from that); on the house with one place per room these
@@ -248,7 +248,7 @@ class CalibrationSamples:
     changes. Without this, a house map whose hall and living room are mapped whole and the
     other rooms by one place each (its hall places see both bedrooms through their doors)
     measured a chance level of 33 and said ``lost`` for 16 of 50 queries, the small rooms' own
-    counts being 13–18; with it 4 (README, "Results").
+    counts being 13–18; with it 4 (docs/results.md).
     """
 
     same_room: np.ndarray

@@ -274,7 +274,7 @@ FLOOR_ELEVATION_DEG = -25.0
 """Homing leaves out matches below this elevation in either panorama (:func:`above_floor`): with
 the camera 1.4 m up, the floor within 3 m. Floors repeat (planks, tiles) and barely move between
 nearby places, so their matches, often aliased, can outvote the walls in the cheirality test
-that sets the sign of the translation (README, "Homing on images")."""
+that sets the sign of the translation (docs/homing.md)."""
 
 
 def above_floor(

@@ -2,7 +2,7 @@
 how often the camera may be triggered.
 
 :class:`Limits` holds them with defaults; ``toploc serve --limits FILE`` reads a TOML file whose
-keys are its field names (the README's "Limits" section lists them). Every bound is checked
+keys are its field names (docs/limits.md lists them). Every bound is checked
 before anything is done: a request beyond one gets an error reply naming the field and the limit,
 and the robot does not move.
 """

@@ -246,7 +246,7 @@ def simulate_runs(
     """Run appendix A's ``go`` for ``runs`` independent worlds of one setting.
 
     ``excess_distance_m`` is the driven path length minus the straight distance from the start
-    to where the run stopped (the thesis's "difference with ideal"; see README for why).
+    to where the run stopped (the thesis's "difference with ideal"; see docs/thesis.md for why).
     """
     features = sample_features(params, runs, rng)
     goal_xy = np.tile(np.asarray(params.goal_xy_m, dtype=float), (runs, 1))

@@ -1,7 +1,7 @@
 """The shape of the code: imports point down the floors, no two modules import each other, and
 the cores load no I/O libraries.
 
-Floors, from the ground up (README, "Layout"): ``homing`` and the pure records
+Floors, from the ground up (docs/architecture.md): ``homing`` and the pure records
 (``mapdb.records``); ``mapdb``; ``localizer``; ``robot``; the shell ``toploc``. A module may
 import its own floor and the floors below it, never one above. Within a floor, the modules'
 import graph has no cycle: an import inside a function counts (it is a dependency all the same,

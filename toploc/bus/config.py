@@ -228,5 +228,5 @@ def exposure_warning(cfg: BusConfig) -> str | None:
     return (
         f"listening on {exposed} beyond this machine without authentication: anyone who "
         "reaches it can command the robot. Pass --zenoh-config with transport/auth/usrpwd "
-        "(dictionary_file) or mTLS, and an access_control (README, Security)."
+        "(dictionary_file) or mTLS, and an access_control (docs/security.md)."
     )

@@ -1,5 +1,5 @@
 """The key expressions of the bus: every key lives under ``toploc/<robot_id>/`` (:func:`key`);
-the suffixes below are the contract's keys (the README's bus table), one constant each."""
+the suffixes below are the contract's keys (the bus table in docs/bus.md), one constant each."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import socket
 ROOT = "toploc"
 FALLBACK_ROBOT_ID = "robot"
 
-# Key suffixes under toploc/<robot_id>/ (see the README's bus table).
+# Key suffixes under toploc/<robot_id>/ (see the bus table in docs/bus.md).
 CAMERA_PANORAMA = "camera/panorama"
 CAMERA_CAPTURE = "camera/capture"
 BASE_CMD = "base/cmd"

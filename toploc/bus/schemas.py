@@ -3,7 +3,7 @@
 A :class:`Schema`'s ``fields`` are those every reader requires (``float`` accepts a JSON integer;
 ``(float, type(None))`` allows null); ``optional`` those a message may leave out, checked where
 a reader says so (:meth:`Schema.check_optional`). The keys are :mod:`toploc.bus.keys`'; the
-README's bus table describes each message. Conversions from and to toploc's own types (odometry,
+The bus table in docs/bus.md describes each message. Conversions from and to toploc's own types (odometry,
 belief, homing results) are :mod:`toploc.bus.messages`'.
 """
 

@@ -46,7 +46,7 @@ from toploc.evaluation.localization_report import (
     "--json",
     "json_path",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Also write the scores to this JSON file (keys: see the README).",
+    help="Also write the scores to this JSON file (keys: see docs/cli.md).",
 )
 @click.option(
     "--plot",
@@ -74,7 +74,7 @@ def localize_command(
     wrong and localized (confidently wrong), wrong and ambiguous, lost; top-1 room accuracy
     (a lost answer is never right), per true room, the rooms the map lacks (right only when
     lost), the calibration of the stated probability, the confusion matrix and the time per
-    query. --json writes them (see README).
+    query. --json writes them (keys: docs/cli.md).
     """
     if (dataset is None) == (not leave_one_out):
         raise click.UsageError("give a DATASET or --leave-one-out (not both)")

@@ -287,7 +287,7 @@ def calibrate_command(db_path: Path, detectors: str | None, progress: bool) -> N
     """Fit the likelihood of each detector's evidence on the map's own places and store it.
 
     Each of up to 60 places, spread over the rooms, is localized against the map without it;
-    the inliers of its own room and of the other rooms give the model (README, "Localization").
+    the inliers of its own room and of the other rooms give the model (docs/localization.md).
     `map build` and `map add` do this themselves unless --no-calibrate is given.
     """
     with _map_errors():

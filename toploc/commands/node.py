@@ -159,7 +159,7 @@ def robot_node(
     "--source",
     required=True,
     help="Where camera/capture takes panoramas: uvc:..., files:DIR, ptu:DIR, omni:... (see "
-    "the README's Cameras; sim needs a robot: toploc node robot).",
+    "docs/cameras.md; sim needs a robot: toploc node robot).",
 )
 @node_options
 def camera_node(

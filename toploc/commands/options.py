@@ -110,7 +110,7 @@ zenoh_config_option = click.option(
     default=None,
     help=(
         "A Zenoh configuration file (JSON5) to start the session from: user/password "
-        "authentication, access control, TLS (README, Security). --mode/--listen/--connect "
+        "authentication, access control, TLS (docs/security.md). --mode/--listen/--connect "
         "given on the command line win over it; the file's win over toploc's defaults. "
         "[env: TOPLOC_ZENOH_CONFIG]"
     ),
@@ -146,7 +146,7 @@ limits_option = click.option(
     "limits_path",
     type=click.Path(dir_okay=False, exists=True, path_type=Path),
     default=None,
-    help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see the README's Limits).",
+    help="A TOML file of bounds (max_forward_m, max_turn_deg, ...; see docs/limits.md).",
 )
 
 

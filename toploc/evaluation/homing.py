@@ -22,7 +22,7 @@ manifest (section 5.6). The others work without headings:
   ``"matched-alv"``. The essential matrix fixes the axis of motion well, but its sign comes
   from which side of both cameras the matched points triangulate on, and a floor texture that
   repeats about once per place spacing (the rendered house) puts most matches on the wrong
-  side: the raw translation then points away from home (see the README);
+  side: the raw translation then points away from home (see docs/homing.md);
 * ``"pose-above-floor"``: ``"pose"`` from the matches above
   :data:`localizer.verification.FLOOR_ELEVATION_DEG` in both panoramas (the floor within 3 m
   left out), falling back to ``"matched-alv"`` (of all matches) without geometry;
@@ -46,7 +46,7 @@ and the lower and upper halves are elevations of that model.
 
 ``"best"`` (``BEST_METHOD``) is the one chosen on the photo rooms, the house and the rendered lab,
 square and corridor, and confirmed on bare houses and photo rooms rendered after the choice
-(README, "Homing on images").
+(docs/homing.md).
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ METHODS: tuple[str, ...] = (
 BEST_METHOD = "pose-vote"
 POSE_MIN_INLIERS = 40
 """``pose-alv`` trusts a verified pose with at least this many inliers (measured on the photo
-rooms, house, lab, square and corridor: README, "Homing on images")."""
+rooms, house, lab, square and corridor: docs/homing.md)."""
 COMPASSES: tuple[str, ...] = ("histogram", "smoothed", "matched")
 
 
