@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -116,7 +116,9 @@ class PlaceEvidence:
     ``matches``: ratio-test pairs; ``inliers``: pairs consistent with the essential matrix;
     ``yaw_rad``: ``heading_query - heading_place`` (nan without geometry); ``inlier_pairs`` (k, 2)
     int64 ``[query_keypoint, place_keypoint]``, the place's rows counted within that place;
-    ``coverage``: :func:`azimuth_coverage` of the inliers' query rays (0 to 1).
+    ``coverage``: :func:`azimuth_coverage` of the inliers' query rays (0 to 1);
+    ``spread_inliers``: the inliers weighted by that share of the query's horizon (computed
+    once here: the likelihood and the belief read it place by place).
     """
 
     place_id: int
@@ -126,11 +128,10 @@ class PlaceEvidence:
     yaw_rad: float
     inlier_pairs: np.ndarray
     coverage: float
+    spread_inliers: float = field(init=False)
 
-    @property
-    def spread_inliers(self) -> float:
-        """The inliers weighted by the share of the query's horizon they cover."""
-        return self.inliers * self.coverage
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "spread_inliers", self.inliers * self.coverage)
 
 
 @dataclass(frozen=True)
