@@ -297,3 +297,14 @@ def test_build_prints_its_result_before_the_calibration_in_plain_words(make_data
     assert "log ratio" not in result.stdout  # the formula: map info, or -v
     verbose = build(make_dataset(4), db_path.with_name("v.db"), "--workers", "0", "-v")
     assert "sift likelihood: log ratio" in verbose.stdout
+
+
+@pytest.mark.usefixtures("fake_extractor")
+def test_a_place_added_to_a_map_of_two_detectors_gets_both(make_dataset, tmp_path, db_path):
+    both = ("--detector", "sift", "--detector", "mser")
+    assert build(make_dataset(2), db_path, "--workers", "0", *both).exit_code == 0
+    pano = write_image(tmp_path / "later.png", 21)
+    added = run("add", pano, "--db", db_path, "--room", "kitchen", "--no-calibrate")
+    assert added.exit_code == 0, added.output
+    assert "sift 24, mser 24" in added.stdout
+    assert_consistent(db_path, detectors=2)

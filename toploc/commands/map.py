@@ -151,12 +151,17 @@ detector_option = click.option(
     "--detector",
     "detectors",
     multiple=True,
-    default=DEFAULT_DETECTORS,
-    show_default=True,
     help="An extraction preset to store (repeatable, or comma-separated: --detector sift "
-    "--detector mser; sift, mser, sift-lower, mser-band20, ...). toploc localize reads sift "
-    "unless told otherwise.",
+    "--detector mser; sift, mser, sift-lower, mser-band20, ...) [default: the detectors the "
+    "map holds; sift for a new map, what toploc localize reads unless told otherwise].",
 )
+
+
+def _presets_for(map_db: MapDatabase, given: tuple[str, ...]) -> tuple[str, ...]:
+    """``given`` (already checked by :func:`parse_detectors`), else the detectors the map
+    holds (sift first), else :data:`DEFAULT_DETECTORS`."""
+    held = sorted(map_db.fingerprint_counts(), key=lambda name: (name != "sift", name))
+    return given or tuple(held) or DEFAULT_DETECTORS
 
 
 @click.group("map")
@@ -216,7 +221,7 @@ def build_command(
     Only regular files inside DATASET are read (see --allow-outside); a room of edges.csv must
     be in the manifest or the map (see --create-rooms).
     """
-    presets = parse_detectors(detectors)
+    given = parse_detectors(detectors) if detectors else ()
     started_s = time.monotonic()
     with _sigterm_as_interrupt(), _map_errors():
         entries = read_dataset(dataset, allow_outside=allow_outside)
@@ -226,6 +231,7 @@ def build_command(
             if not create_rooms:
                 known = {entry.room for entry in entries} | {r.name for r in map_db.rooms()}
                 check_edge_rooms(dataset, edge_rows, known)
+            presets = _presets_for(map_db, given)
             report = build_map(
                 map_db,
                 entries,
@@ -280,9 +286,10 @@ def add_command(
         check_name(room.strip())
     except ValueError as error:
         raise click.ClickException(f"--room: {error}") from None
-    presets = parse_detectors(detectors)
+    given = parse_detectors(detectors) if detectors else ()
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
+        presets = _presets_for(map_db, given)
         extractor = resolve_extractor(presets, camera, _overrides(map_db, read_width_px))
         report = build_map(map_db, [entry], extractor, workers=0, progress=False)
     (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
