@@ -62,7 +62,7 @@ def start_slow_build(dataset: Path, db_path: Path, delay_s: float = 0.3) -> subp
     }
     command = [sys.executable, "-m", "mapdb_cli_with_fake_extractor", "build", str(dataset),
                "--db", str(db_path), "--workers", "2", "--no-progress",
-               "--no-calibrate"]  # fmt: skip
+               "--no-calibrate", "--detector", "sift,mser"]  # fmt: skip
     return subprocess.Popen(
         command,
         env=env,

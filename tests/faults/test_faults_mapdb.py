@@ -232,9 +232,10 @@ MAP_FAULTS = ["empty-map", "zero-bytes", "text", "null-version"]
 
 @pytest.mark.parametrize(
     ("kind", "sim"),
-    # a map without places is served without the simulated robot (a map about to be recorded,
-    # tests/robot/test_p2os_end_to_end.py); the simulated robot needs the map's image size
-    [(kind, sim) for kind in MAP_FAULTS for sim in (True, False) if sim or kind != "empty-map"],
+    # a map without places is not bad: it is served, with the simulated robot or without (a
+    # map about to be recorded: tests/toploc/test_node_commands.py, tests/robot/
+    # test_p2os_end_to_end.py)
+    [(kind, sim) for kind in MAP_FAULTS for sim in (True, False) if kind != "empty-map"],
     ids=lambda value: {True: "sim", False: "no-sim"}.get(value, value),
 )
 def test_serve_a_bad_map_is_one_line(tmp_path: Path, kind: str, sim: bool) -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import shutil
 
+import cv2
+import numpy as np
 from click.testing import CliRunner
 
 from toploc.cli import main
@@ -196,3 +198,26 @@ def test_an_equirectangular_panorama_localizes_against_a_cylinder_map(building_m
     result = run("localize", path, "--db", building_map[0], "--json")
     assert result.exit_code == 0, result.output
     assert json.loads(result.output)["top"]["room"] == "kitchen"
+
+
+def test_localize_with_a_detector_the_map_lacks_names_the_ones_it_holds(building_map):
+    db_path, dataset = building_map
+    image = dataset / "images" / "kitchen_000.png"
+    mser = run("localize", image, "--db", db_path, "--detector", "mser")
+    assert mser.exit_code == 1
+    assert "has no 'mser' fingerprints: it holds sift (--detector sift;" in mser.output
+    assert "built with --detector mser" in mser.output
+    orb = run("eval", "localize", dataset, "--db", db_path, "--detector", "orb", "--no-progress")
+    assert orb.exit_code == 1
+    assert "has no 'orb' fingerprints: it holds sift" in orb.output
+    assert "toploc's detectors are mser, sift" in orb.output
+
+
+def test_localize_of_a_frame_matching_no_place_says_lost_and_names_no_room(building_map, tmp_path):
+    noise = tmp_path / "noise.png"
+    cv2.imwrite(str(noise), np.random.default_rng(0).integers(0, 256, (96, 512), np.uint8))
+    result = run("localize", noise, "--db", building_map[0])
+    assert result.exit_code == 0, result.output
+    first = result.output.splitlines()[0]
+    assert first.startswith("lost: no room of the map matches (best ")
+    assert " 1.000" not in result.output.split("best places")[0]

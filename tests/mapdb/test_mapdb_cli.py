@@ -30,14 +30,15 @@ def test_build_then_rerun_is_idempotent(make_dataset, db_path: Path) -> None:
     dataset = make_dataset(6)
     first = build(dataset, db_path, "--workers", "2")
     assert first.exit_code == 0, first.output
-    assert "added 6, skipped 0, failed 0" in first.stdout
+    assert "added 6, skipped 0, failed 0 in " in first.stdout
+    assert "the map holds 6 places in 3 rooms" in first.stdout
     second = build(dataset, db_path, "--workers", "2")
     assert second.exit_code == 0
     assert "added 0, skipped 6, failed 0" in second.stdout
     assert "skipped 6 image(s) already in the map" in second.stdout
     third = build(dataset, db_path, "--workers", "0", "--verbose")
     assert "skipped img/pano_000.png: already in the map as place" in third.stderr
-    assert table_counts(db_path) == {"rooms": 3, "edges": 0, "places": 6, "fingerprints": 12}
+    assert table_counts(db_path) == {"rooms": 3, "edges": 0, "places": 6, "fingerprints": 6}
 
 
 @pytest.mark.usefixtures("fake_extractor")
@@ -71,9 +72,9 @@ def test_build_with_corrupt_image_imports_the_rest_and_fails(make_dataset, db_pa
     assert result.exit_code == 1
     assert "failed img/pano_003.png:" in result.stderr
     assert "Error: 1 image(s) failed: img/pano_003.png" in result.stderr
-    assert "added img/pano_000.png: room 'kitchen', sift 24, mser 24" in result.stderr
+    assert "added img/pano_000.png: room 'kitchen', sift 24\n" in result.stderr  # sift only
     assert table_counts(db_path)["places"] == 4
-    assert_consistent(db_path)
+    assert_consistent(db_path, detectors=1)
 
 
 @pytest.mark.usefixtures("fake_extractor")
@@ -152,7 +153,7 @@ def test_full_disk_and_locked_database_during_build(
         holder.close()
     assert locked.exit_code == 1 and "is locked by another process" in locked.stderr
     assert table_counts(db_path) == before
-    assert_consistent(db_path)
+    assert_consistent(db_path, detectors=1)
 
 
 @pytest.mark.usefixtures("fake_extractor")
@@ -174,10 +175,10 @@ def test_add_connect_info_and_export(tmp_path: Path, db_path: Path) -> None:
     text = run("info", "--db", db_path)
     assert text.exit_code == 0
     assert "2 rooms, 2 places" in text.stdout and "  lab: 1 places" in text.stdout
-    assert "fingerprints: mser 2, sift 2" in text.stdout and "corridor <-> lab" in text.stdout
+    assert "fingerprints: sift 2" in text.stdout and "corridor <-> lab" in text.stdout
     info = json.loads(run("info", "--db", db_path, "--json").stdout)
     assert info["n_places"] == 2 and info["edges"] == [["corridor", "lab"]]
-    assert info["fingerprints_per_detector"] == {"mser": 2, "sift": 2}
+    assert info["fingerprints_per_detector"] == {"sift": 2}
     assert info["file_size_bytes"] > 0
 
     out = tmp_path / "rooms.graphml"
@@ -311,3 +312,42 @@ def test_build_fails_a_four_by_three_photo_and_adds_the_panoramas(tmp_path, db_p
     assert result.exit_code == 1
     assert "added 2, skipped 0, failed 1" in result.stdout
     assert "photo.png: 640x480 px (1.33:1) is not a 360° panorama" in result.stderr
+
+
+@pytest.mark.usefixtures("fake_extractor")
+def test_build_stores_sift_unless_told_and_a_repeated_detector_adds_mser(make_dataset, tmp_path):
+    dataset = make_dataset(2)
+    for db_path, extra, expected in [
+        (tmp_path / "default.db", (), {"sift": 2}),
+        (
+            tmp_path / "both.db",
+            ("--detector", "sift", "--detector", "mser"),
+            {"mser": 2, "sift": 2},
+        ),
+    ]:
+        assert build(dataset, db_path, "--workers", "0", *extra).exit_code == 0
+        with MapDatabase.open(db_path, readonly=True) as map_db:
+            assert map_db.fingerprint_counts() == expected
+
+
+@pytest.mark.usefixtures("fake_extractor")
+def test_build_prints_its_result_before_the_calibration_in_plain_words(make_dataset, db_path):
+    result = build(make_dataset(4), db_path, "--workers", "0")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert "added 4, skipped 0, failed 0" in lines[0]
+    assert lines[1].startswith("sift: calibrat")
+    assert "log ratio" not in result.stdout  # the formula: map info, or -v
+    verbose = build(make_dataset(4), db_path.with_name("v.db"), "--workers", "0", "-v")
+    assert "sift likelihood: log ratio" in verbose.stdout
+
+
+@pytest.mark.usefixtures("fake_extractor")
+def test_a_place_added_to_a_map_of_two_detectors_gets_both(make_dataset, tmp_path, db_path):
+    both = ("--detector", "sift", "--detector", "mser")
+    assert build(make_dataset(2), db_path, "--workers", "0", *both).exit_code == 0
+    pano = write_image(tmp_path / "later.png", 21)
+    added = run("add", pano, "--db", db_path, "--room", "kitchen", "--no-calibrate")
+    assert added.exit_code == 0, added.output
+    assert "sift 24, mser 24" in added.stdout
+    assert_consistent(db_path, detectors=2)

@@ -52,7 +52,8 @@ def test_signal_mid_build_then_rerun_completes(
         "TOPLOC_FAKE_EXTRACT_DELAY_S": "0.25",
     }
     command = [sys.executable, "-m", "mapdb_cli_with_fake_extractor", "build", str(dataset),
-               "--db", str(db_path), "--workers", "2", "--no-progress"]  # fmt: skip
+               "--db", str(db_path), "--workers", "2", "--no-progress",
+               "--detector", "sift,mser"]  # fmt: skip
     process = subprocess.Popen(
         command,
         env=env,
@@ -80,6 +81,7 @@ def test_signal_mid_build_then_rerun_completes(
     assert 3 <= killed["places"] < N_IMAGES
     assert_consistent(db_path)
 
+    # the re-run names no detector: it follows the map's two
     result = CliRunner().invoke(
         map_group, ["build", str(dataset), "--db", str(db_path), "--no-progress"]
     )

@@ -91,7 +91,7 @@ def test_sim_p2os_command_prints_a_port_that_speaks_p2os(tmp_path: Path) -> None
             assert base.parser.skipped_bytes > 0
         process.send_signal(signal.SIGINT)
         out, _ = process.communicate(timeout=10)
-        assert process.returncode == 0 and out.strip().endswith("stopped")
+        assert process.returncode == 130 and out.strip().endswith("stopped")  # 130: Ctrl-C
     finally:
         if process.poll() is None:
             process.kill()

@@ -179,3 +179,37 @@ def test_per_room_columns_stay_aligned_with_long_room_names():
     )
     lines = format_per_room(score).splitlines()
     assert len({len(line) for line in lines}) == 1, lines  # every column ends where its header does
+
+
+def mapped_and_unknown() -> list[QueryOutcome]:
+    """Two queries from rooms of the map (one right, one wrong) and three from an attic the map
+    lacks, all rightly lost."""
+    return [
+        outcome("kitchen", "kitchen"),
+        outcome("hall", "kitchen"),
+        *(outcome("attic", "hall", "lost", p=0.5) for _ in range(3)),
+    ]
+
+
+def test_the_headline_scores_the_queries_from_rooms_of_the_map():
+    score = score_localization(mapped_and_unknown(), MAP_ROOMS)
+    known = score.known_room
+    assert (known.n, known.top1, known.answer_rate) == (2, 0.5, 1.0)
+    assert known.outcomes["right_localized"] == known.outcomes["wrong_localized"] == 1
+    lines = format_outcomes(score).splitlines()
+    assert "the 2 queries from rooms of the map" in lines[0]
+    assert lines[1].split()[-2:] == ["1", "50.0%"]  # right, localized: 1 of the 2
+    assert lines[6].startswith("n 2: top-1 room 50.0%")
+
+
+def test_the_queries_from_rooms_the_map_lacks_have_a_line_of_their_own():
+    last = format_outcomes(score_localization(mapped_and_unknown(), MAP_ROOMS)).splitlines()[-1]
+    assert last.startswith("rooms not in the map (attic): n 3, lost 3 (right)")
+    assert "localized 0 (confidently wrong" in last
+
+
+def test_the_json_adds_the_known_room_score_and_keeps_top1_over_every_query():
+    record = json.loads(json.dumps(score_localization(mapped_and_unknown(), MAP_ROOMS).to_json()))
+    assert record["top1"] == pytest.approx(0.2)  # as before: 1 right of all 5
+    assert record["known_room"]["top1"] == pytest.approx(0.5)
+    assert record["known_room"]["n"] == 2 and record["unknown_room"]["lost"] == 3

@@ -3,8 +3,8 @@
 A :class:`Schema`'s ``fields`` are those every reader requires (``float`` accepts a JSON integer;
 ``(float, type(None))`` allows null); ``optional`` those a message may leave out, checked where
 a reader says so (:meth:`Schema.check_optional`). The keys are :mod:`toploc.bus.keys`'; the
-The bus table in docs/bus.md describes each message. Conversions from and to toploc's own types (odometry,
-belief, homing results) are :mod:`toploc.bus.messages`'.
+bus table in docs/bus.md describes each message. Conversions from and to toploc's own types
+(odometry, belief, homing results) are :mod:`toploc.bus.messages`'.
 """
 
 from __future__ import annotations

@@ -27,7 +27,6 @@ from toploc.evaluation.localization_report import (
     format_outcomes,
     format_per_room,
     format_timing,
-    format_unknown_rooms,
 )
 
 
@@ -70,10 +69,11 @@ def localize_command(
     """Localize every panorama of DATASET against the map: a folder with manifest.csv, or one
     sub-folder of panoramas per room (named after the room).
 
-    Prints each query's outcome counted in five: right and localized, right but ambiguous,
-    wrong and localized (confidently wrong), wrong and ambiguous, lost; top-1 room accuracy
-    (a lost answer is never right), per true room, the rooms the map lacks (right only when
-    lost), the calibration of the stated probability, the confusion matrix and the time per
+    Prints the outcomes of the queries from rooms of the map, counted in five: right and
+    localized, right but ambiguous, wrong and localized (confidently wrong), wrong and
+    ambiguous, lost; their top-1 room accuracy (a lost answer is never right); then the
+    queries from rooms the map lacks on a line of their own (right only when lost); per true
+    room, the calibration of the stated probability, the confusion matrix and the time per
     query. --json writes them (keys: docs/cli.md).
     """
     if (dataset is None) == (not leave_one_out):
@@ -86,7 +86,7 @@ def localize_command(
             assert dataset is not None
             run = localize_dataset(localizer, dataset, progress)
     score = run.score
-    sections = [format_outcomes(score), format_per_room(score), format_unknown_rooms(score)]
+    sections = [format_outcomes(score), format_per_room(score)]
     sections += [format_calibration(score), format_confusion(score.confusion), format_timing(score)]
     click.echo("\n".join(section for section in sections if section))
     if json_path is not None:

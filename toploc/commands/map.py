@@ -17,6 +17,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,7 +26,6 @@ from typing import Any
 import click
 from tqdm import tqdm
 
-from localizer.likelihood import RatioLikelihood
 from mapdb.build import BuildReport, Outcome, Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import (
@@ -37,21 +37,25 @@ from mapdb.dataset import (
 )
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
-from mapdb.records import MapInfo, check_name
-from toploc.commands.options import camera_option
+from mapdb.records import check_name
+from toploc.commands.map_text import describe_likelihood, explain_likelihood, format_info
+from toploc.commands.options import camera_option, db_option
 from toploc.commands.record import record_command
 from toploc.extraction import map_overrides, resolve_extractor
 
-DEFAULT_DETECTORS = "sift,mser"
+DEFAULT_DETECTORS = ("sift",)
+"""What ``map build`` and ``map add`` extract unless told: what ``localize`` reads by default."""
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 
 
-def parse_detectors(text: str) -> tuple[str, ...]:
-    """``"sift,mser"`` -> ``("sift", "mser")``; each an extraction preset, each detector once."""
+def parse_detectors(text: str | tuple[str, ...]) -> tuple[str, ...]:
+    """``"sift,mser"`` or ``("sift", "mser")`` (a repeated ``--detector``, each may list
+    several) -> ``("sift", "mser")``; each an extraction preset, each detector once."""
     from localizer.features import PRESETS, params_from_preset
 
-    presets = tuple(name.strip() for name in text.split(",") if name.strip())
+    texts = (text,) if isinstance(text, str) else text
+    presets = tuple(name.strip() for part in texts for name in part.split(",") if name.strip())
     if not presets:
         raise click.BadParameter("give at least one detector, e.g. sift,mser")
     unknown = [name for name in presets if name not in PRESETS]
@@ -99,12 +103,23 @@ def _log_outcome(outcome: Outcome, verbose: bool) -> None:
         tqdm.write(outcome.describe(), file=sys.stderr)
 
 
-def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
-    """Print the summary; exit 130 if interrupted, 1 if any image failed."""
-    click.echo(f"{db_path}: {report.summary()}")
+def _summarize(report: BuildReport, db_path: Path, elapsed_s: float, verbose: bool) -> None:
+    """The result first: what was added, skipped and failed, how long it took, and what the
+    map holds now."""
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        rooms = map_db.rooms()
+    places = sum(room.n_places for room in rooms)
+    click.echo(
+        f"{db_path}: {report.summary()} in {elapsed_s:.1f} s; the map holds {places} places "
+        f"in {len(rooms)} rooms"
+    )
     skipped = report.count(Status.SKIPPED)
     if skipped and not verbose:
         click.echo(f"skipped {skipped} image(s) already in the map (-v lists them)")
+
+
+def _finish(report: BuildReport) -> None:
+    """Exit 130 if interrupted, 1 if any image failed."""
     if report.interrupted:
         click.echo("interrupted: the map is consistent; run the same command again to finish")
         raise SystemExit(EXIT_INTERRUPTED)
@@ -113,13 +128,7 @@ def _finish(report: BuildReport, db_path: Path, verbose: bool) -> None:
         raise click.ClickException(f"{len(failed)} image(s) failed: {', '.join(failed)}")
 
 
-db_option = click.option(
-    "--db",
-    "db_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The map database file (SQLite).",
-)
+map_db_option = db_option("The map database file (SQLite).")
 calibrate_option = click.option(
     "--calibrate/--no-calibrate",
     default=True,
@@ -141,10 +150,18 @@ read_width_option = click.option(
 detector_option = click.option(
     "--detector",
     "detectors",
-    default=DEFAULT_DETECTORS,
-    show_default=True,
-    help="Comma-separated extraction presets (sift, mser, sift-lower, mser-band20, ...).",
+    multiple=True,
+    help="An extraction preset to store (repeatable, or comma-separated: --detector sift "
+    "--detector mser; sift, mser, sift-lower, mser-band20, ...) [default: the detectors the "
+    "map holds; sift for a new map, what toploc localize reads unless told otherwise].",
 )
+
+
+def _presets_for(map_db: MapDatabase, given: tuple[str, ...]) -> tuple[str, ...]:
+    """``given`` (already checked by :func:`parse_detectors`), else the detectors the map
+    holds (sift first), else :data:`DEFAULT_DETECTORS`."""
+    held = sorted(map_db.fingerprint_counts(), key=lambda name: (name != "sift", name))
+    return given or tuple(held) or DEFAULT_DETECTORS
 
 
 @click.group("map")
@@ -154,7 +171,7 @@ def map_group() -> None:
 
 @map_group.command("build")
 @click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
-@db_option
+@map_db_option
 @detector_option
 @click.option(
     "--workers",
@@ -177,11 +194,16 @@ def map_group() -> None:
     help="Create the rooms edges.csv names that have no panorama (an error otherwise).",
 )
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
-@click.option("-v", "--verbose", is_flag=True, help="List every image, not only failures.")
+@click.option(
+    "-v",
+    "--verbose",
+    is_flag=True,
+    help="List every image, not only failures, and print the likelihood's formula.",
+)
 def build_command(
     dataset: Path,
     db_path: Path,
-    detectors: str,
+    detectors: tuple[str, ...],
     workers: int,
     camera: str,
     read_width_px: int | None,
@@ -199,7 +221,8 @@ def build_command(
     Only regular files inside DATASET are read (see --allow-outside); a room of edges.csv must
     be in the manifest or the map (see --create-rooms).
     """
-    presets = parse_detectors(detectors)
+    given = parse_detectors(detectors) if detectors else ()
+    started_s = time.monotonic()
     with _sigterm_as_interrupt(), _map_errors():
         entries = read_dataset(dataset, allow_outside=allow_outside)
         edge_rows = read_edge_rows(dataset)
@@ -208,6 +231,7 @@ def build_command(
             if not create_rooms:
                 known = {entry.room for entry in entries} | {r.name for r in map_db.rooms()}
                 check_edge_rooms(dataset, edge_rows, known)
+            presets = _presets_for(map_db, given)
             report = build_map(
                 map_db,
                 entries,
@@ -216,20 +240,22 @@ def build_command(
                 progress=progress,
                 on_outcome=lambda outcome: _log_outcome(outcome, verbose),
             )
+            added = 0
             if not report.interrupted:
                 for room in {room for edge in edges for room in edge} if create_rooms else ():
                     map_db.add_room(room)
                 added = connect_known_rooms(map_db, edges)
-                if added:
-                    click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
+        _summarize(report, db_path, time.monotonic() - started_s, verbose)
+        if not report.interrupted and added:
+            click.echo(f"connected {added} pair(s) of rooms from {EDGES_NAME}")
         if calibrate and not report.interrupted and report.count(Status.ADDED):
-            _calibrate(db_path, presets, progress)
-    _finish(report, db_path, verbose)
+            _calibrate(db_path, presets, progress, verbose)
+    _finish(report)
 
 
 @map_group.command("add")
 @click.argument("image", type=click.Path(dir_okay=False, path_type=Path))
-@db_option
+@map_db_option
 @click.option("--room", required=True, help="The room the panorama was taken in.")
 @click.option("--x-m", type=float, default=None, help="x in the room's frame, metres.")
 @click.option("--y-m", type=float, default=None, help="y in the room's frame, metres.")
@@ -245,7 +271,7 @@ def add_command(
     x_m: float | None,
     y_m: float | None,
     heading_deg: float | None,
-    detectors: str,
+    detectors: tuple[str, ...],
     camera: str,
     read_width_px: int | None,
     calibrate: bool,
@@ -260,9 +286,10 @@ def add_command(
         check_name(room.strip())
     except ValueError as error:
         raise click.ClickException(f"--room: {error}") from None
-    presets = parse_detectors(detectors)
+    given = parse_detectors(detectors) if detectors else ()
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
     with _map_errors(), MapDatabase.open(db_path) as map_db:
+        presets = _presets_for(map_db, given)
         extractor = resolve_extractor(presets, camera, _overrides(map_db, read_width_px))
         report = build_map(map_db, [entry], extractor, workers=0, progress=False)
     (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
@@ -275,7 +302,7 @@ def add_command(
 
 
 @map_group.command("calibrate")
-@db_option
+@map_db_option
 @click.option(
     "--detector",
     "detectors",
@@ -323,41 +350,31 @@ def _overrides(map_db: MapDatabase, read_width_px: int | None) -> dict[str, Any]
     return {**overrides, "max_width_px": read_width_px}
 
 
-def _calibrate(db_path: Path, presets: tuple[str, ...], progress: bool) -> None:
-    """Calibrate and store the likelihood of every preset's detector; one line each."""
+def _calibrate(
+    db_path: Path, presets: tuple[str, ...], progress: bool, formula: bool = False
+) -> None:
+    """Calibrate and store the likelihood of every preset's detector; one line each in plain
+    words (and its formula with ``formula``), with the time it took."""
     from localizer.features import params_from_preset
     from toploc.maps import calibrate_map
 
     for preset in presets:
         detector = params_from_preset(preset).detector
+        started_s = time.monotonic()
         try:
             model = calibrate_map(db_path, detector, progress)
         except ValueError as error:
             raise click.ClickException(str(error)) from error
-        click.echo(f"{db_path}: {detector} likelihood {describe_likelihood(model)}")
-
-
-def describe_likelihood(model: RatioLikelihood) -> str:
-    """One line: the fitted ratio and where it came from."""
-    fit = model.fit
-    where = (
-        f"fitted on {fit['n_same_room']:.0f} same-room and {fit['n_other_room']:.0f} other-room "
-        f"counts (medians {fit['same_room_median']:.0f} and {fit['other_room_median']:.0f})"
-        if "n_same_room" in fit
-        else "ratio left at the defaults (no room has two places to compare)"
-    )
-    counted = "spread inliers" if model.count == "spread" else "inliers (raw)"
-    return (
-        f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
-        f"{model.per_inlier:.4f} n ({model.motion} motion, n = {counted}), lost below "
-        f"{model.min_inliers} {counted}; {where}"
-    )
+        took = f" ({time.monotonic() - started_s:.1f} s)"
+        click.echo(f"{explain_likelihood(detector, model)}{took}")
+        if formula:
+            click.echo(f"  {detector} likelihood: {describe_likelihood(model)}")
 
 
 @map_group.command("connect")
 @click.argument("room_a")
 @click.argument("room_b")
-@db_option
+@map_db_option
 def connect_command(room_a: str, room_b: str, db_path: Path) -> None:
     """Record that the robot can drive between ROOM_A and ROOM_B (an undirected edge)."""
     if room_a == room_b:
@@ -368,50 +385,18 @@ def connect_command(room_a: str, room_b: str, db_path: Path) -> None:
     click.echo(f"{state} {room_a} <-> {room_b}")
 
 
-def _format_info(info: MapInfo) -> str:
-    single = [room.name for room in info.rooms if room.n_places == 1]
-    hint = (
-        [
-            f"  one place only: {', '.join(single)} (a view far from it, at a door or in a "
-            "corner, may stay ambiguous; a second place there helps, and lets the calibration "
-            "measure the room)"
-        ]
-        if single
-        else []
-    )
-    lines = [
-        f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
-        f"{len(info.rooms)} rooms, {info.n_places} places",
-        "rooms:",
-        *(f"  {room.name}: {room.n_places} places" for room in info.rooms),
-        *hint,
-        "fingerprints: "
-        + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
-        f"edges ({len(info.edges)}):",
-        *(f"  {a} <-> {b}" for a, b in info.edges),
-        "likelihood:",
-        *(
-            f"  {detector}: {describe_likelihood(RatioLikelihood.from_json(model))}"
-            for detector, model in info.likelihoods.items()
-        ),
-    ]
-    if not info.likelihoods:
-        lines[-1] += " not calibrated (toploc map calibrate)"
-    return "\n".join(lines)
-
-
 @map_group.command("info")
-@db_option
+@map_db_option
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def info_command(db_path: Path, as_json: bool) -> None:
     """Rooms, places per room, fingerprints per detector, edges and file size."""
     with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
         info = map_db.info()
-    click.echo(json.dumps(info.to_json(), indent=2) if as_json else _format_info(info))
+    click.echo(json.dumps(info.to_json(), indent=2) if as_json else format_info(info))
 
 
 @map_group.command("export")
-@db_option
+@map_db_option
 @click.option(
     "--graphml",
     "graphml_path",

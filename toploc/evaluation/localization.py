@@ -130,12 +130,65 @@ class UnknownRooms:
 
 
 @dataclass(frozen=True)
+class KnownRooms:
+    """The queries from rooms the map holds, which the headline scores (a query from a room
+    the map lacks can only be right by being lost: :class:`UnknownRooms` reports them apart).
+    ``outcomes``: counts of :data:`OUTCOMES`; ``top1``: share right (lost is not);
+    ``top1_answered``: the same among those not lost; ``answer_rate``: share not lost;
+    ``ambiguous_rate``: share ambiguous. Rates in 0..1, None when there is no such query (or
+    for ``top1_answered``, none answered)."""
+
+    n: int
+    outcomes: dict[str, int]
+    top1: float | None
+    top1_answered: float | None
+    answer_rate: float | None
+    ambiguous_rate: float | None
+
+    @classmethod
+    def of(cls, outcomes: Sequence[str]) -> KnownRooms:
+        """From the :data:`OUTCOMES` of the queries from rooms of the map."""
+        counts = count_outcomes(outcomes)
+        n = len(outcomes)
+        answered = n - counts["lost"]
+        right = counts["right_localized"] + counts["right_ambiguous"]
+        ambiguous = counts["right_ambiguous"] + counts["wrong_ambiguous"]
+        return cls(
+            n=n,
+            outcomes=counts,
+            top1=right / n if n else None,
+            top1_answered=right / answered if answered else None,
+            answer_rate=answered / n if n else None,
+            ambiguous_rate=ambiguous / n if n else None,
+        )
+
+    @property
+    def rates(self) -> dict[str, float] | None:
+        """Each of :data:`OUTCOMES` as a share of these queries (None if there are none)."""
+        return outcome_rates(self.outcomes) if self.n else None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "n": self.n,
+            "outcomes": self.outcomes,
+            "rates": self.rates,
+            "top1": self.top1,
+            "top1_answered": self.top1_answered,
+            "answer_rate": self.answer_rate,
+            "ambiguous_rate": self.ambiguous_rate,
+        }
+
+
+@dataclass(frozen=True)
 class LocalizationScore:
     """What ``toploc eval localize`` reports (rates in 0..1, times in milliseconds).
 
-    ``top1``: share of all queries that name the true room and are not lost (a query from a
-    room the map lacks never does). ``top1_answered``: the same among the queries not lost
-    (``None`` if all are lost); ``answer_rate``: share not lost. ``outcomes``/``rates``: counts
+    ``known_room``: the queries from rooms the map holds, scored alone (:class:`KnownRooms`:
+    what the report's headline says); ``unknown_room``: the others (:class:`UnknownRooms`).
+    The other fields count every query: ``top1``: share of all queries that name the true room
+    and are not lost (a query from a room the map lacks never does). ``top1_answered``: the
+    same among the queries not lost (``None`` if all are lost); ``answer_rate``: share not
+    lost. ``outcomes``/``rates``: counts
     and shares of :data:`OUTCOMES`. ``per_room``: per true room, ``{"n", "top1",
     "ambiguous_rate"}``; ``per_room_outcomes``: per true room, its :class:`RoomOutcomes`.
     ``confusion``: true room -> predicted room (or :data:`LOST_COLUMN`) -> count;
@@ -158,6 +211,7 @@ class LocalizationScore:
     per_room_outcomes: dict[str, RoomOutcomes]
     unknown_room: UnknownRooms
     calibration: Reliability
+    known_room: KnownRooms
 
     @property
     def rates(self) -> dict[str, float]:
@@ -181,6 +235,7 @@ class LocalizationScore:
             "per_room_outcomes": {r: o.to_json() for r, o in self.per_room_outcomes.items()},
             "unknown_room": self.unknown_room.to_json(),
             "calibration": self.calibration.to_json(),
+            "known_room": self.known_room.to_json(),
         }
 
 
@@ -217,6 +272,9 @@ def score_localization(
         unknown_room=unknown_rooms(queries, map_rooms),
         calibration=reliability(
             [q.top_probability for q in queries], [is_right(o) for o in outcomes]
+        ),
+        known_room=KnownRooms.of(
+            [o for q, o in zip(queries, outcomes, strict=True) if q.true_room in map_rooms]
         ),
     )
 

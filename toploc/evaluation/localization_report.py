@@ -1,5 +1,6 @@
-"""The text report of ``toploc eval localize``: the five outcomes first (what a user reads),
-then each true room, the rooms the map lacks, and the time per query. Pure: text from a
+"""The text report of ``toploc eval localize``: the five outcomes of the queries from rooms of
+the map first (what a user reads), the queries from rooms the map lacks on their own line, then
+each true room and the time per query. Pure: text from a
 :class:`~toploc.evaluation.localization.LocalizationScore`."""
 
 from __future__ import annotations
@@ -24,23 +25,30 @@ SHORT_LABELS = {
 
 
 def format_outcomes(score: LocalizationScore) -> str:
-    """The five outcomes with count and share, then top-1 (lost counts as not right), the
-    answer rate and top-1 among answered queries."""
-    rates = score.rates
-    lines = [f"{'outcome':18s} {'n':>5s} {'share':>7s}"]
+    """The headline, on the queries from rooms of the map: the five outcomes with count and
+    share, then top-1 (lost counts as not right), the answer rate and top-1 among answered
+    queries; then the queries from rooms the map lacks on a line of their own
+    (:func:`format_unknown_rooms`: lost is right there, localized the failure)."""
+    known = score.known_room
+    unknown = format_unknown_rooms(score)
+    if known.n == 0:
+        return "\n".join(["no query is from a room of the map", unknown])
+    whose = f"  (the {known.n} queries from rooms of the map)" if unknown else ""
+    lines = [f"{'outcome':18s} {'n':>5s} {'share':>7s}{whose}"]
+    rates = known.rates or {}
     for outcome in OUTCOMES:
         note = "  <- confidently wrong" if outcome == "wrong_localized" else ""
         lines.append(
-            f"{OUTCOME_LABELS[outcome]:18s} {score.outcomes[outcome]:5d} "
+            f"{OUTCOME_LABELS[outcome]:18s} {known.outcomes[outcome]:5d} "
             f"{rates[outcome]:7.1%}{note}"
         )
-    answered = "n/a" if score.top1_answered is None else f"{score.top1_answered:.1%}"
+    answered = "n/a" if known.top1_answered is None else f"{known.top1_answered:.1%}"
     lines.append(
-        f"n {score.n}: top-1 room {score.top1:.1%} (lost counts as not right), "
-        f"answered {score.answer_rate:.1%}, top-1 among answered {answered}, "
-        f"ambiguous {score.ambiguous_rate:.1%}"
+        f"n {known.n}: top-1 room {known.top1 or 0.0:.1%} (lost counts as not right), "
+        f"answered {known.answer_rate or 0.0:.1%}, top-1 among answered {answered}, "
+        f"ambiguous {known.ambiguous_rate or 0.0:.1%}"
     )
-    return "\n".join(lines)
+    return "\n".join([*lines, unknown] if unknown else lines)
 
 
 def format_per_room(score: LocalizationScore) -> str:
@@ -70,7 +78,7 @@ def format_unknown_rooms(score: LocalizationScore) -> str:
     return (
         f"rooms not in the map ({', '.join(unknown.rooms)}): n {unknown.n}, "
         f"lost {unknown.lost} (right), ambiguous {unknown.ambiguous}, "
-        f"localized {unknown.localized} (confidently wrong)"
+        f"localized {unknown.localized} (confidently wrong: the failure here)"
     )
 
 

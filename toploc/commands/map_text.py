@@ -1,0 +1,80 @@
+"""The map as ``toploc map`` prints it: ``map info`` (:func:`format_info`), and a fitted
+likelihood in plain words after a build or an add (:func:`explain_likelihood`) or as its formula
+in ``map info`` and with ``-v`` (:func:`describe_likelihood`). Pure: text from records."""
+
+from __future__ import annotations
+
+from localizer.likelihood import RatioLikelihood
+from mapdb.records import MapInfo
+
+
+def _counted(model: RatioLikelihood) -> str:
+    return "spread inliers" if model.count == "spread" else "inliers (raw)"
+
+
+def describe_likelihood(model: RatioLikelihood) -> str:
+    """One line: the fitted ratio's formula and where it came from."""
+    fit = model.fit
+    where = (
+        f"fitted on {fit['n_same_room']:.0f} same-room and {fit['n_other_room']:.0f} other-room "
+        f"counts (medians {fit['same_room_median']:.0f} and {fit['other_room_median']:.0f})"
+        if "n_same_room" in fit
+        else "ratio left at the defaults (no room has two places to compare)"
+    )
+    counted = _counted(model)
+    return (
+        f"log ratio {model.intercept:.2f} + {model.slope:.2f} log(1 + n) + "
+        f"{model.per_inlier:.4f} n ({model.motion} motion, n = {counted}), lost below "
+        f"{model.min_inliers} {counted}; {where}"
+    )
+
+
+def explain_likelihood(detector: str, model: RatioLikelihood) -> str:
+    """One line in plain words: how many inliers a view of the same room and one of another
+    room gave on the map's own places (medians), and below how many a frame is lost."""
+    fit = model.fit
+    counted = _counted(model)
+    lost = f"a frame with fewer than {model.min_inliers} {counted} is lost"
+    if "n_same_room" not in fit:
+        return (
+            f"{detector}: calibration left at the defaults (no room has two places to compare); "
+            f"{lost}"
+        )
+    return (
+        f"{detector}: calibrated on the map's own places: a view matches a place of its own "
+        f"room with {fit['same_room_median']:.0f} {counted} (median), of another room with "
+        f"{fit['other_room_median']:.0f}; {lost}"
+    )
+
+
+def format_info(info: MapInfo) -> str:
+    """``map info``'s text: rooms and places, fingerprints, edges, each likelihood's formula."""
+    single = [room.name for room in info.rooms if room.n_places == 1]
+    hint = (
+        [
+            f"  one place only: {', '.join(single)} (a view far from it, at a door or in a "
+            "corner, may stay ambiguous; a second place there helps, and lets the calibration "
+            "measure the room)"
+        ]
+        if single
+        else []
+    )
+    lines = [
+        f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
+        f"{len(info.rooms)} rooms, {info.n_places} places",
+        "rooms:",
+        *(f"  {room.name}: {room.n_places} places" for room in info.rooms),
+        *hint,
+        "fingerprints: "
+        + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
+        f"edges ({len(info.edges)}):",
+        *(f"  {a} <-> {b}" for a, b in info.edges),
+        "likelihood:",
+        *(
+            f"  {detector}: {describe_likelihood(RatioLikelihood.from_json(model))}"
+            for detector, model in info.likelihoods.items()
+        ),
+    ]
+    if not info.likelihoods:
+        lines[-1] += " not calibrated (toploc map calibrate)"
+    return "\n".join(lines)
