@@ -1,12 +1,14 @@
 """Real Zenoh sessions on 127.0.0.1 for the tests: a free port, a node-side and a client-side
 session, and waiting for a node's liveliness token."""
 
+import math
 import socket
 import time
 from collections.abc import Callable
 
 import zenoh
 
+from localizer.belief import LocalizationState, RoomBelief
 from toploc import bus
 
 ROBOT_ID = "r1"
@@ -47,3 +49,18 @@ class Bus:
 
     def wait_alive(self, node: str) -> None:
         assert wait_for(lambda: node in alive_nodes(self.client)), f"{node} never became alive"
+
+
+def make_belief(rooms: dict[str, float], state: str = "ambiguous", stamp: float = 1.0) -> dict:
+    """A belief message as a service returns it (``RoomBelief.to_json()``): ``rooms`` maps each
+    room to its probability; the best place is place 4 of the likeliest room, 37 inliers."""
+    return RoomBelief(
+        rooms=tuple(rooms),
+        probabilities=tuple(rooms.values()),
+        state=LocalizationState(state),
+        entropy_bits=-sum(p * math.log2(p) for p in rooms.values() if p > 0),
+        best_place_id=4,
+        best_place_inliers=37,
+        stamp_s=stamp,
+        best_place_room=max(rooms, key=rooms.__getitem__),
+    ).to_json()

@@ -164,8 +164,11 @@ def test_map_calibrate_stores_the_likelihood_that_map_info_shows(building_map, t
     shutil.copy(building_map[0], db_path)
     result = run("map", "calibrate", "--db", db_path, "--no-progress")
     assert result.exit_code == 0, result.output
-    assert "sift likelihood log ratio" in result.output
-    assert "n = spread inliers" in result.output  # says which count the model reads
+    assert result.output.startswith("sift: calibrated on the map's own places")
+    assert "spread inliers" in result.output  # says which count the model reads
+    assert "log ratio" not in result.output  # the formula is map info's
+    shown = run("map", "info", "--db", db_path)
+    assert "log ratio" in shown.output and "n = spread inliers" in shown.output
     info = run("map", "info", "--db", db_path, "--json")
     likelihood = json.loads(info.output)["likelihoods"]["sift"]
     assert likelihood["model"] == "ratio" and likelihood["fit"]["n_same_room"] > 0

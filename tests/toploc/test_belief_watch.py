@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import os
 import queue
 import signal
@@ -16,10 +15,9 @@ import time
 from pathlib import Path
 
 import pytest
-from bus_helpers import ROBOT_ID, Bus, free_endpoint, wait_for
+from bus_helpers import ROBOT_ID, Bus, free_endpoint, make_belief, wait_for
 from click.testing import CliRunner
 
-from localizer.belief import LocalizationState, RoomBelief
 from toploc import bus
 from toploc.cli import main
 from toploc.commands.belief_watch import ASCII_BLOCKS, Screen, render_watch
@@ -32,16 +30,7 @@ STAMP = 1764615296.25
 
 def belief(rooms: dict[str, float], state: str, stamp: float = STAMP) -> dict:
     """A belief message as the localizer node sends it."""
-    return RoomBelief(
-        rooms=tuple(rooms),
-        probabilities=tuple(rooms.values()),
-        state=LocalizationState(state),
-        entropy_bits=-sum(p * math.log2(p) for p in rooms.values() if p > 0),
-        best_place_id=4,
-        best_place_inliers=37,
-        stamp_s=stamp,
-        best_place_room=max(rooms, key=rooms.__getitem__),
-    ).to_json()
+    return make_belief(rooms, state, stamp)
 
 
 def progress(step: int, state: str = "homing") -> dict:

@@ -8,10 +8,9 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from bus_helpers import ROBOT_ID, Bus, alive_nodes, free_port, wait_for
+from bus_helpers import ROBOT_ID, Bus, alive_nodes, free_port, make_belief, wait_for
 from click.testing import CliRunner
 
-from localizer.belief import LocalizationState, RoomBelief
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
@@ -152,20 +151,6 @@ def test_a_corrupt_capture_reply_is_a_clear_error(zbus, payload, attachment, mat
 
 
 # --- localizer -------------------------------------------------------------------------------
-
-
-def make_belief(rooms: dict[str, float], state: str = "ambiguous", stamp: float = 1.0) -> dict:
-    """A belief message as a service returns it (``RoomBelief.to_json()``)."""
-    return RoomBelief(
-        rooms=tuple(rooms),
-        probabilities=tuple(rooms.values()),
-        state=LocalizationState(state),
-        entropy_bits=-sum(p * math.log2(p) for p in rooms.values() if p > 0),
-        best_place_id=4,
-        best_place_inliers=37,
-        stamp_s=stamp,
-        best_place_room=max(rooms, key=rooms.__getitem__),
-    ).to_json()
 
 
 class FakeService:

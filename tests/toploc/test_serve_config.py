@@ -175,7 +175,7 @@ def test_serve_runs_from_a_file_and_logs_a_map_add_at_info(tmp_path):
 
 def test_the_example_in_the_help_is_a_valid_config(tmp_path):
     assert serve.help is not None
-    example = serve.help.split("\b\n", 1)[1]
+    example = serve.help.split("\b\n", 1)[1].split("\n\n", 1)[0]  # the block, not what follows
     (tmp_path / "limits.toml").write_text("max_forward_m = 1.0\n")
     params = options("--config", str(write(tmp_path, "\n".join(
         line.strip() for line in example.splitlines()

@@ -16,8 +16,8 @@ from pathlib import Path
 import click
 
 from toploc import bus
-from toploc.bus.config import client_bus_config
 from toploc.commands.belief_text import format_belief
+from toploc.commands.bus_client import client_session
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 
@@ -64,13 +64,7 @@ def belief(
         watch_belief(robot_id, zenoh_file, endpoints, timeout_s, localize, active, reset, as_json)
         return
     try:
-        cfg = client_bus_config(robot_id, zenoh_file, endpoints or None)
-    except bus.ZenohConfigError as error:
-        raise click.ClickException(str(error)) from None
-    except ValueError as error:
-        raise click.BadParameter(str(error)) from error
-    try:
-        with bus.open_session(cfg) as session:
+        with client_session(robot_id, zenoh_file, endpoints) as session:
             client = LocalizerClient(
                 session, robot_id, timeout_s, localize_timeout_s=max(timeout_s, LOCALIZE_TIMEOUT_S)
             )

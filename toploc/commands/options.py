@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 import sys
@@ -203,7 +204,7 @@ STOP_SIGNALS_HELP = (
 def long_running(command: Any) -> Any:
     """Put under ``@click.command``: ends the command's help with :data:`STOP_SIGNALS_HELP`
     (it must wait on :func:`stop_on_signals` and exit through :func:`stopped`)."""
-    command.__doc__ = f"{(command.__doc__ or '').rstrip()}\n\n{STOP_SIGNALS_HELP}"
+    command.__doc__ = f"{inspect.cleandoc(command.__doc__ or '')}\n\n{STOP_SIGNALS_HELP}"
     return command
 
 

@@ -25,7 +25,7 @@ import click
 from localizer.robot_protocol import Pose2D
 from mapdb.records import check_name
 from toploc import bus
-from toploc.bus.config import client_bus_config
+from toploc.commands.bus_client import client_session
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
 
 if TYPE_CHECKING:
@@ -192,13 +192,7 @@ def record_command(
         raise click.UsageError("--count goes with --every-m")
     pose = "none" if no_pose else "given" if any(v is not None for v in given) else "odometry"
     try:
-        cfg = client_bus_config(robot_id, zenoh_file, endpoints or None)
-    except bus.ZenohConfigError as error:
-        raise click.ClickException(str(error)) from None
-    except ValueError as error:
-        raise click.BadParameter(str(error)) from error
-    try:
-        with bus.open_session(cfg) as session:
+        with client_session(robot_id, zenoh_file, endpoints) as session:
             robot = RemoteRobot(session, robot_id, timeout_s)
             try:
                 client = MapClient(session, robot_id, timeout_s, max(timeout_s, ADD_TIMEOUT_S))
