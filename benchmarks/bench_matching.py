@@ -35,7 +35,6 @@ import numpy as np
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.matching import DEFAULT_RATIO, match_descriptors, ratio_test_pairs
 from localizer.panorama_io import read_panorama
-from localizer.rays import rays_from_fingerprint
 from localizer.verification import verify
 from mapdb.dataset import read_dataset
 from toploc.maps import load_map
@@ -100,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     for entry in (pool[i] for i in picked):
         fingerprint = localizer.extract(read_panorama(entry.path))
         query = np.ascontiguousarray(fingerprint.descriptors, np.float32)
-        query_rays = rays_from_fingerprint(fingerprint)
+        query_rays = fingerprint.rays()
         shortlist = index.shortlist(query, localizer.evidence_params.shortlist)
         neighbours, _ = index.search(query, index.params.neighbours)
         place_of = table.keypoint_place_index[np.maximum(neighbours, 0)]

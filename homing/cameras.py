@@ -229,3 +229,13 @@ def pixels_from_rays(camera: CameraModel, rays: ArrayLike) -> np.ndarray:
     elevation = np.arctan2(r[:, 2], np.hypot(r[:, 0], r[:, 1]))
     x = column_from_bearing(bearing, camera.width_px)
     return np.column_stack([x, camera.row_px(elevation)])
+
+
+def rays_from_keypoints(
+    keypoints_xy: ArrayLike, bearings_rad: ArrayLike, camera: CameraModel
+) -> np.ndarray:
+    """(n, 3) unit rays (robot frame, REP-103) of keypoints from their stored bearings (rad)
+    and, through ``camera``, the elevation of their rows (``keypoints_xy`` in px); (0, 3) for
+    none. The rays the essential-matrix verification consumes."""
+    xy = np.asarray(keypoints_xy, dtype=np.float64).reshape(-1, 2)
+    return rays_from_angles(bearings_rad, camera.elevation_rad(xy[:, 1]))

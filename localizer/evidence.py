@@ -14,7 +14,7 @@ weighted by that coverage (``PlaceEvidence.spread_inliers``).
 
 Each stored place is read on its own cylinder (the table keeps every place's image size and
 extraction parameters); its keypoints' rays are computed once per map
-(:func:`localizer.rays.rays_from_table`) and passed in as ``table_rays``.
+(:meth:`mapdb.records.FingerprintTable.rays`) and passed in as ``table_rays``.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from localizer.matching import DEFAULT_RATIO, match_descriptors
-from localizer.rays import rays_from_fingerprint, rays_from_table
 from localizer.retrieval import PlaceIndex
 from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, verify
 from mapdb.records import Fingerprint, FingerprintTable
@@ -206,7 +205,7 @@ def place_evidence(
     params = params or EvidenceParams()
     _check_inputs(query, table)
     if table_rays is None:
-        table_rays = rays_from_table(table)
+        table_rays = table.rays()
     elif table_rays.shape != (len(table.bearings_rad), 3):
         raise ValueError(
             f"table_rays must have shape ({len(table.bearings_rad)}, 3), got {table_rays.shape}"
@@ -223,7 +222,7 @@ def place_evidence(
     else:
         candidates = index.shortlist(query.descriptors, params.shortlist, left_out)
     t1 = time.perf_counter()
-    query_rays = rays_from_fingerprint(query)
+    query_rays = query.rays()
 
     def evaluate(i: np.integer) -> PlaceEvidence:
         return evaluate_place(query, query_rays, table, table_rays, int(i), params)

@@ -25,7 +25,6 @@ from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, pl
 from localizer.features import extract_with_camera, matching_overrides
 from localizer.likelihood import Likelihood, RatioLikelihood, room_likelihood
 from localizer.policy import PlaceSimilarity
-from localizer.rays import rays_from_table
 from localizer.retrieval import PlaceIndex
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
 
@@ -90,7 +89,7 @@ class LoadedMap:
         return cls(
             path=snapshot.path,
             table=table,
-            rays=rays_from_table(table),
+            rays=table.rays(),
             places=snapshot.places,
             rooms=snapshot.rooms,
             edges=snapshot.edges,

@@ -26,8 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from localizer.rays import triangulated_depths
-
 
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -189,3 +187,21 @@ def _in_front(
     front = (d_place > 0) & (d_query > 0)  # parallel rays have depth 0: neither
     behind = (d_place < 0) & (d_query < 0)
     return int(front.sum()) - int(behind.sum())
+
+
+def triangulated_depths(
+    rotated_place: np.ndarray, rays_query: np.ndarray, translation_dir: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Depths ``(d_place, d_query)`` (units of the baseline) of the closest approach of the
+    rays ``d_place * rotated_place + t`` and ``d_query * rays_query`` (query frame; the place
+    rays already rotated into it): the least-squares solution of
+    ``d_place * a - d_query * c = -t``. Parallel rays get depth 0 (no triangulation)."""
+    k = np.einsum("ij,ij->i", rotated_place, rays_query)
+    a_t = rotated_place @ translation_dir
+    c_t = rays_query @ translation_dir
+    det = 1.0 - k**2
+    ok = det > 1e-9
+    safe = np.where(ok, det, 1.0)
+    d_place = np.where(ok, (k * c_t - a_t) / safe, 0.0)
+    d_query = np.where(ok, (c_t - k * a_t) / safe, 0.0)
+    return d_place, d_query

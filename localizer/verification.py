@@ -2,9 +2,10 @@
 
 Ramisa et al. (2006): the evidence that a query panorama was taken near a stored place is the
 number of matched keypoints consistent with one two-view geometry. Both panoramas are 360°, so
-the geometry is estimated from unit bearing rays (:mod:`localizer.rays`), not from pinhole image
-points: ``pycolmap.estimate_relative_pose(rays_place, rays_query, RANSACOptions)`` runs
-LO-RANSAC with the 5-point solver on rays directly and returns ``cam2_from_cam1``.
+the geometry is estimated from unit bearing rays (:meth:`mapdb.records.Fingerprint.rays`), not
+from pinhole image points: ``pycolmap.estimate_relative_pose(rays_place, rays_query,
+RANSACOptions)`` runs LO-RANSAC with the 5-point solver on rays directly and returns
+``cam2_from_cam1``.
 
 Frames and conventions (REP-103 robot frames, x forward, y left, z up, CCW positive):
 
@@ -42,8 +43,7 @@ import numpy as np
 import pycolmap
 
 from homing.bearings import wrap_angle_rad
-from localizer.planar import estimate_planar_pose
-from localizer.rays import triangulated_depths
+from localizer.planar import estimate_planar_pose, triangulated_depths
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
 

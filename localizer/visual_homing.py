@@ -64,7 +64,6 @@ from homing.home_directions import alv_home_directions_rad
 from localizer.cameras import CameraSpec
 from localizer.features import extract_preset, extract_with_camera
 from localizer.matching import match_descriptors
-from localizer.rays import rays_from_fingerprint
 from localizer.verification import Verification, cheirality_sign, home_direction_rad, verify
 from mapdb.records import Fingerprint
 
@@ -236,7 +235,7 @@ def _pose_step(
 ) -> HomeStep:
     matches = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
     matched = _best_step(current, goal, params, shift_rad, matches)
-    rays_here, rays_goal = rays_from_fingerprint(current), rays_from_fingerprint(goal)
+    rays_here, rays_goal = current.rays(), goal.rays()
     verification = verify(rays_here, rays_goal, matches)
     if math.isnan(home_direction_rad(verification)):
         return matched

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from homing.cameras import CameraModel, ParamValue, camera_from_params
+from homing.cameras import CameraModel, ParamValue, camera_from_params, rays_from_keypoints
 
 MAX_NAME_CHARS = 128
 """The longest name the map stores, in characters: room names, and every other name-like
@@ -228,6 +228,11 @@ class Fingerprint:
             camera_model=self.camera,
         )
 
+    def rays(self) -> np.ndarray:
+        """(n, 3) float64 unit rays (robot frame, REP-103) of the keypoints through this
+        fingerprint's own camera, row ``i`` for keypoint ``i``; (0, 3) when empty."""
+        return rays_from_keypoints(self.keypoints_xy, self.bearings_rad, self.camera)
+
 
 @dataclass(frozen=True)
 class StoredFingerprint:
@@ -330,6 +335,17 @@ class FingerprintTable:
     def rows(self, i: int) -> slice:
         """The stacked rows of the place at index ``i``."""
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
+
+    def rays(self) -> np.ndarray:
+        """(N, 3) float64 unit rays (robot frame, REP-103) of every stacked keypoint, each place
+        through its own camera (:attr:`cameras`); row ``r`` for the table's row ``r``."""
+        rays = np.zeros((len(self.bearings_rad), 3))
+        for i, camera in enumerate(self.cameras):
+            rows = self.rows(i)
+            rays[rows] = rays_from_keypoints(
+                self.keypoints_xy[rows], self.bearings_rad[rows], camera
+            )
+        return rays
 
     def fingerprint(self, i: int) -> Fingerprint:
         """The fingerprint of the place at index ``i`` (views into the stacked arrays)."""

@@ -11,7 +11,6 @@ import pytest
 from homing.bearings import wrap_angle_rad
 from localizer.evidence import EvidenceParams, PlaceEvidence, QueryEvidence, place_evidence
 from localizer.features import extract_preset
-from localizer.rays import rays_from_fingerprint
 from localizer.robot_protocol import Pose2D
 from localizer.verification import verify
 from mapdb.database import MapDatabase
@@ -65,7 +64,7 @@ def test_yaw_between_two_headings_at_one_spot(square: Square) -> None:
     from localizer.matching import match_descriptors
 
     pairs = match_descriptors(query.descriptors, place.descriptors)
-    result = verify(rays_from_fingerprint(query), rays_from_fingerprint(place), pairs)
+    result = verify(query.rays(), place.rays(), pairs)
     assert result.inliers >= 30
     assert abs(math.degrees(wrap_angle_rad(result.yaw_rad - math.radians(65.0)))) < 2.0
 

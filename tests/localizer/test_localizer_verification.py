@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from homing.bearings import wrap_angle_rad
 from homing.cameras import Cylinder, rays_from_angles
-from localizer.rays import rays_from_fingerprint
 from localizer.verification import (
     Verification,
     VerificationParams,
@@ -192,18 +191,18 @@ def test_yaw_from_rotation_convention() -> None:
     assert yaw_from_rotation(rz(0.5).T) == pytest.approx(0.5)
 
 
-def test_rays_from_fingerprint_geometry() -> None:
+def test_a_fingerprints_rays_follow_its_bearings_and_rows() -> None:
     w, h = 360, 41
     xy = np.array([[0.0, 20.0], [90.0, 20.0], [180.0, 0.0], [270.0, 40.0]])
     fp = Fingerprint("sift", w, h, xy, -2 * np.pi * xy[:, 0] / w, np.zeros((4, 128), np.float32))
-    rays = rays_from_fingerprint(fp)
+    rays = fp.rays()
     np.testing.assert_allclose(np.linalg.norm(rays, axis=1), 1.0)
     np.testing.assert_allclose(rays[0], [1.0, 0.0, 0.0], atol=1e-12)  # heading, horizon
     np.testing.assert_allclose(rays[1], [0.0, -1.0, 0.0], atol=1e-12)  # 90° clockwise: right
     f = w / (2 * np.pi)
     assert rays[2, 2] == pytest.approx(np.sin(np.arctan(20.0 / f)))  # top row looks up
     assert rays[3, 2] == pytest.approx(-np.sin(np.arctan(20.0 / f)))
-    assert rays_from_fingerprint(Fingerprint.empty("sift", w, h)).shape == (0, 3)
+    assert Fingerprint.empty("sift", w, h).rays().shape == (0, 3)
     with pytest.raises(ValueError, match="cylinder camera is 100x41"):
         Fingerprint(
             "sift", w, h, xy, fp.bearings_rad, fp.descriptors, camera_model=Cylinder(100, 41)
@@ -212,7 +211,7 @@ def test_rays_from_fingerprint_geometry() -> None:
 
 
 def test_above_floor_keeps_the_matches_whose_rays_both_clear_the_floor_band():
-    from localizer.rays import rays_from_angles
+    from homing.cameras import rays_from_angles
     from localizer.verification import above_floor
 
     elevations_deg = np.array([-40.0, -20.0, 0.0, 30.0])

@@ -204,7 +204,6 @@ def test_pose_translation_points_home_on_renders(projection: str) -> None:
     from localizer.cameras import CameraSpec
     from localizer.features import extract_with_camera
     from localizer.matching import match_descriptors
-    from localizer.rays import rays_from_fingerprint
     from localizer.robot_protocol import Pose2D
     from localizer.verification import home_direction_rad, verify
     from robot.render import render_panorama
@@ -224,7 +223,7 @@ def test_pose_translation_points_home_on_renders(projection: str) -> None:
     )
     assert fp_here.params["camera"] == projection
     pairs = match_descriptors(fp_here.descriptors, fp_home.descriptors)
-    result = verify(rays_from_fingerprint(fp_here), rays_from_fingerprint(fp_home), pairs)
+    result = verify(fp_here.rays(), fp_home.rays(), pairs)
     assert result.inliers >= 10
     truth = math.atan2(home.y_m - here.y_m, home.x_m - here.x_m) - here.heading_rad
     error = math.remainder(home_direction_rad(result) - truth, 2 * math.pi)

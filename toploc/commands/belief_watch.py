@@ -18,6 +18,7 @@ import json
 import logging
 import queue
 import shutil
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -161,7 +162,7 @@ def watch_belief(
     from toploc.nodes.localizer import LOCALIZE_TIMEOUT_S, LocalizerClient
 
     events: queue.Queue[Event] = queue.Queue()
-    out = click.get_text_stream("stdout")
+    out = sys.stdout  # click.get_text_stream is deprecated from click 8.5
     screen = Screen(out, out.isatty() and not as_json)
     subscribers: list[zenoh.Subscriber] = []
     try:

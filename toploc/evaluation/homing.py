@@ -80,7 +80,6 @@ from localizer.cameras import parse_camera
 from localizer.features import DEFAULT_PARAMS, extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
-from localizer.rays import rays_from_fingerprint
 from localizer.verification import (
     Verification,
     above_floor,
@@ -238,7 +237,7 @@ class PairCache:
     def rays(self, i: int) -> np.ndarray:
         """The unit rays of fingerprint ``i``'s keypoints (computed once)."""
         if i not in self._rays:
-            self._rays[i] = rays_from_fingerprint(self.fingerprints[i])
+            self._rays[i] = self.fingerprints[i].rays()
         return self._rays[i]
 
     def holds(self, fingerprints: Sequence[Fingerprint]) -> bool:
