@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import os
 import signal
+import subprocess
+import sys
+from pathlib import Path
 
 from toploc.commands.options import stop_on_signals
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_sigterm_and_ctrl_c_set_the_event_within_the_block() -> None:
@@ -30,3 +36,33 @@ def test_the_previous_handlers_are_back_after_the_block() -> None:
     with stop_on_signals():
         assert signal.getsignal(signal.SIGINT) is not before[0]
     assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
+
+
+WAIT_FOR_A_SIGNAL_ON_ANOTHER_THREAD = """
+import signal, threading, time
+from toploc.commands.options import stop_on_signals
+
+with stop_on_signals() as stop:
+    def send() -> None:  # the kernel may deliver a process's signal to any of its threads
+        time.sleep(0.3)
+        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+        time.sleep(30)  # this thread stays alive, as Zenoh's do
+
+    threading.Thread(target=send, daemon=True).start()
+    stop.{wait}
+print("stopped", stop.exit_code)
+"""
+
+
+def test_the_wait_ends_when_the_signal_lands_on_another_thread() -> None:
+    """A node's main thread wakes for a SIGTERM that the kernel gave another thread."""
+    script = WAIT_FOR_A_SIGNAL_ON_ANOTHER_THREAD.replace("{wait}", "wait_for_signal()")
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=20,
+    )
+    assert done.stdout.strip() == "stopped 0", done.stdout + done.stderr

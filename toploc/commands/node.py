@@ -76,7 +76,7 @@ def _run(
         session = stack.enter_context(open_session(config))
         what = enter(stack, session, limits)
         click.echo(f"{describe}{what} as {describe_bus(config)}. Ctrl-C stops.")
-        stop.wait()
+        stop.wait_for_signal()
     except _ERRORS as error:
         raise click.ClickException(str(error)) from error
     return stop

@@ -215,6 +215,16 @@ class StopSignal(threading.Event):
         super().__init__()
         self.signum: int | None = None
 
+    def wait_for_signal(self) -> None:
+        """Block the main thread until SIGINT or SIGTERM has set the event.
+
+        Waits in short slices, not at once: the kernel may deliver the signal to any thread
+        (Zenoh runs many), and Python runs its handler only when the main thread next executes
+        bytecode; a main thread asleep in one untimed wait would never run it (a node once went
+        on for 20 s after SIGTERM, its main thread in ``Event.wait()``)."""
+        while not self.wait(0.2):
+            pass
+
     def received(self, signum: int) -> None:
         """Record ``signum`` (the first only) and set the event."""
         if self.signum is None:

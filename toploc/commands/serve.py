@@ -176,7 +176,7 @@ def _serve(
                 f"serving {db} as {describe_bus(config)}; robot: {where}; camera: {source}. "
                 "Ctrl-C stops."
             )
-            stop.wait()
+            stop.wait_for_signal()
         return stop, service.refresher
     except (BusError, MapDatabaseError, P2osError) as error:  # one line naming what failed
         raise click.ClickException(str(error)) from error

@@ -150,5 +150,5 @@ def p2os(
                 stack.enter_context(session)
                 stack.enter_context(SimTruthNode(session, robot_id, sim, seed=seed))
                 click.echo(f"true pose on toploc/{robot_id}/sim/true_pose (simulation only)")
-        stop.wait()
+        stop.wait_for_signal()
     stopped(stop)
