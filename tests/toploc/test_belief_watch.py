@@ -226,3 +226,10 @@ def test_watch_says_why_there_is_no_belief_yet_and_goes_on(zbus):
         "places yet: record some first"
     )
     assert last.startswith("state: localized") and "  kitchen  ████████████████████  1.000" in last
+
+
+def test_a_lost_belief_shows_no_room_as_the_answer() -> None:
+    lines = render_watch(belief({"office_b": 1.0, "office_a": 0.0}, "lost"))
+    assert lines[0].startswith("state: lost")
+    assert lines[1] == "  lost: no room of the map matches (best office_b, 37 inliers)"
+    assert not any("1.000" in line for line in lines)

@@ -29,6 +29,7 @@ import click
 import zenoh
 
 from toploc import bus
+from toploc.commands.belief_text import ranked_rooms, state_line
 from toploc.commands.bus_client import client_session
 
 if TYPE_CHECKING:  # imported when the watch runs (the node modules load more than click needs)
@@ -70,9 +71,12 @@ def render_watch(
             f"state: {belief['state']}   entropy: {belief['entropy_bits']:.3f} bits   "
             f"stamp: {stamp:.3f} ({clock}){stale}"
         )
-        rooms = sorted(belief["rooms"].items(), key=lambda item: (-item[1], item[0]))
-        width = max((len(room) for room, _ in rooms), default=0)
-        lines += [f"  {room:<{width}}  {bar(p, blocks)}  {p:.3f}" for room, p in rooms]
+        if belief["state"] == "lost":  # no room is the answer: no bars (as toploc belief)
+            lines.append(f"  {state_line(belief)}")
+        else:
+            rooms = ranked_rooms(belief)
+            width = max((len(room) for room, _ in rooms), default=0)
+            lines += [f"  {room:<{width}}  {bar(p, blocks)}  {p:.3f}" for room, p in rooms]
         best = belief["best_place"]
         lines.append(
             "best place: none"
