@@ -48,13 +48,18 @@ def load_map(
     database closed again). Raises :class:`mapdb.errors.MapDatabaseError` with a one-line
     message for a map without ``detector`` fingerprints (``EmptyMapError``, also a
     ``ValueError``) and for a missing, locked or damaged file."""
-    check_detector(db_path, detector)
-    return LoadedMap.from_snapshot(load_snapshot(db_path, detector), use_index)
+    try:
+        snapshot = load_snapshot(db_path, detector)
+    except EmptyMapError:
+        check_detector(db_path, detector)  # say which detectors the map holds, if any
+        raise
+    return LoadedMap.from_snapshot(snapshot, use_index)
 
 
 def check_detector(db_path: Path | str, detector: str) -> None:
     """Raise :class:`mapdb.errors.EmptyMapError` naming the detectors the map at ``db_path``
-    holds unless one is ``detector`` (a missing or damaged file: ``MapDatabaseError``)."""
+    holds unless one is ``detector`` (a missing or damaged file: ``MapDatabaseError``); read
+    only when a map turned out to have no ``detector`` place, so a load opens the file once."""
     with open_for_reading(Path(db_path)) as map_db:
         held = sorted(map_db.fingerprint_counts())
     if detector in held:
