@@ -267,14 +267,6 @@ def enter_localizer_nodes(
     return LocalizerNodes(runner, localizer, refresher, homing)
 
 
-class ReadOnlyMapNode(MapNode):
-    """A :class:`MapNode` that serves the built-in map's rooms, places and edges but refuses
-    every write (``map/add``, ``map/connect``) with :data:`BUILTIN_MAP_REFUSAL`."""
-
-    def _open_writable(self, where: str) -> MapDatabase:
-        raise bus.BusMessageError(f"{where}: {BUILTIN_MAP_REFUSAL.format(db=self.db_path)}")
-
-
 def enter_map_node(
     stack: ExitStack,
     session: zenoh.Session,
@@ -289,11 +281,12 @@ def enter_map_node(
     localizer's camera model and extracts its detector into an empty map. ``builtin_map``:
     ``db_path`` is toploc's own world map, which the node refuses to write."""
     localizer_config = localizer_config or LocalizerConfig()
-    node_class = ReadOnlyMapNode if builtin_map else MapNode
+    read_only = BUILTIN_MAP_REFUSAL.format(db=db_path) if builtin_map else None
     return stack.enter_context(
-        node_class(
+        MapNode(
             session, robot_id, db_path, limits, str(localizer_config.camera),
             detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
+            read_only=read_only,
         )
     )  # fmt: skip
 

@@ -100,6 +100,8 @@ class MapNode(Node):
     ``detectors``: what ``map/add`` extracts when the map holds no fingerprint yet (otherwise
     each detector the map holds). After each write ``map/changed`` is published.
     ``refresh_after_s``: told in the ``map/add`` reply (when the localizer uses the place).
+    ``read_only``: why the node refuses every write (``map/add``, ``map/connect``) with that
+    error reply, e.g. toploc's built-in map; None: it writes.
     """
 
     def __init__(
@@ -111,8 +113,10 @@ class MapNode(Node):
         camera: str = "auto",
         detectors: tuple[str, ...] = ("sift",),
         refresh_after_s: float | None = None,
+        read_only: str | None = None,
     ) -> None:
         super().__init__(session, robot_id, NODE_NAME)
+        self.read_only = read_only
         self.db_path = Path(db_path)
         self.limits = limits or Limits()
         self.camera = camera
@@ -162,6 +166,8 @@ class MapNode(Node):
         return bus.Reply(EDGES.encode({"edges": edges}))
 
     def _open_writable(self, where: str) -> MapDatabase:
+        if self.read_only is not None:
+            raise bus.BusMessageError(f"{where}: {self.read_only}")
         try:
             return MapDatabase.open(self.db_path, create=False)
         except MapDatabaseError as error:
