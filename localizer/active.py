@@ -9,8 +9,9 @@ that a drive publishes progress and can be cancelled).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
@@ -29,10 +30,25 @@ CANCELLED = "cancelled"
 @dataclass(frozen=True)
 class ActiveParams:
     """``max_targets``: places the robot may drive to before it gives up; ``homing``: the
-    visual homing loop's settings."""
+    visual homing loop's settings. ``lost_looks``: while the belief is ``lost``, the robot
+    turns by ``lost_turn_deg``, drives ``lost_step_m`` and looks again, at most this many
+    times (a robot woken facing a bare wall or a doorway sees little; a step away it may see
+    its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a move, issue 19)."""
 
     max_targets: int = 4
     homing: HomingParams = field(default_factory=HomingParams)
+    lost_looks: int = 2
+    lost_turn_deg: float = 120.0
+    lost_step_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.max_targets < 0 or self.lost_looks < 0:
+            raise ValueError(
+                f"max_targets and lost_looks must be >= 0, got {self.max_targets}, "
+                f"{self.lost_looks}"
+            )
+        if not (math.isfinite(self.lost_turn_deg) and math.isfinite(self.lost_step_m)):
+            raise ValueError("lost_turn_deg and lost_step_m must be finite")
 
 
 @dataclass(frozen=True)
@@ -48,14 +64,15 @@ class Visit:
 @dataclass(frozen=True)
 class ActiveResult:
     """How an active localization went: the first and final beliefs, every visit, the
-    frames used (captures that went into the belief or into homing) and the distance driven
-    (odometric, metres)."""
+    frames used (captures that went into the belief or into homing), the distance driven
+    (odometric, metres) and how many times the robot, lost, stepped away to look again."""
 
     first: RoomBelief
     final: RoomBelief
     visits: tuple[Visit, ...]
     frames: int
     distance_m: float
+    looks_elsewhere: int = 0
 
 
 def active_step(
@@ -89,6 +106,7 @@ def localize_actively(
     belief (state ``homing`` while driving). ``home(place_id)`` drives the robot to a place
     (default: :func:`drive_home` toward its stored fingerprint with ``params.homing``); a drive
     that ends with reason :data:`CANCELLED` is the last: the robot looks once where it stopped.
+    While the belief is ``lost`` the robot steps away and looks again (``params.lost_looks``).
     """
     chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
@@ -105,8 +123,23 @@ def localize_actively(
     first, frames, distance = belief, 1, 0.0
     notify(belief)
     visits: list[Visit] = []
-    context = PolicyContext(similarity=localizer.similarity)
+    context = PolicyContext(
+        similarity=localizer.similarity,
+        lookalikes=localizer.lookalikes,
+        counterparts=localizer.counterparts,
+    )
+    looks_elsewhere = 0
     while True:
+        if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
+            looks_elsewhere += 1
+            moved = robot.move(math.radians(params.lost_turn_deg), params.lost_step_m)
+            distance += abs(moved.moved_m)
+            localizer.predict(HOMING_STAY_PROBABILITY)
+            observation = localizer.observe(robot.capture().image)
+            belief = localizer.update(observation)
+            frames += 1
+            notify(belief)
+            continue
         target = active_step(
             belief,
             observation.evidence.places,
@@ -123,10 +156,10 @@ def localize_actively(
         frames += len(homing.lengths) + 1
         distance += homing.distance_m
         localizer.predict(HOMING_STAY_PROBABILITY)
-        observation = localizer.observe(robot.capture().image)
+        observation = replace(localizer.observe(robot.capture().image), at_place=target)
         belief = localizer.update(observation)
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
         if homing.reason == CANCELLED:
             break
-    return ActiveResult(first, belief, tuple(visits), frames, distance)
+    return ActiveResult(first, belief, tuple(visits), frames, distance, looks_elsewhere)

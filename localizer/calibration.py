@@ -19,11 +19,11 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from localizer.evidence import EvidenceParams, place_evidence
+from localizer.evidence import EvidenceParams, PlaceEvidence, place_evidence
 from localizer.likelihood import (
     CalibrationSamples,
     RatioLikelihood,
@@ -31,6 +31,7 @@ from localizer.likelihood import (
     room_inliers,
 )
 from localizer.localizer import LoadedMap
+from localizer.lookalikes import is_counterpart
 
 MAX_QUERIES = 60
 """Leave-one-out queries per calibration: about 20 s here, whatever the size of the map."""
@@ -64,15 +65,26 @@ def _van_der_corput(i: int, n: int) -> float:
     return int(format(i, f"0{bits}b")[::-1], 2) / (1 << bits)
 
 
-def leave_one_out_counts(
+@dataclass(frozen=True)
+class LeftOut:
+    """One leave-one-out query: the table index of the place left out, its room, the best
+    count of every room of the map with the place as the query, and that evidence."""
+
+    table_index: int
+    room: str
+    counts: dict[str, float]
+    evidence: tuple[PlaceEvidence, ...]
+
+
+def leave_one_out(
     loaded: LoadedMap,
     params: EvidenceParams | None = None,
     max_queries: int = MAX_QUERIES,
     *,
     count: str,
-) -> Iterator[tuple[str, dict[str, float]]]:
-    """Per queried place (:func:`query_places`): its room and the best count (``count``, see
-    :func:`~localizer.likelihood.place_count`) of every room of the map when the place is the
+) -> Iterator[LeftOut]:
+    """Per queried place (:func:`query_places`): the :class:`LeftOut` query, the best counts
+    (``count``, see :func:`~localizer.likelihood.place_count`) taken when the place is the
     query and itself is left out (yielded one by one: this takes a while)."""
     params = params or EvidenceParams()
     table = loaded.table
@@ -87,7 +99,30 @@ def leave_one_out_counts(
             table_rays=loaded.rays,
         )
         counts = room_inliers(evidence.places, loaded.rooms, count=count)
-        yield table.rooms[i], dict(zip(loaded.rooms, (float(c) for c in counts), strict=True))
+        per_room = dict(zip(loaded.rooms, (float(c) for c in counts), strict=True))
+        yield LeftOut(i, table.rooms[i], per_room, evidence.places)
+
+
+def counterpart_pairs(
+    loaded: LoadedMap, queries: Sequence[LeftOut], pairs: Sequence[tuple[str, str]]
+) -> tuple[tuple[int, int], ...]:
+    """The counterparts (:func:`localizer.lookalikes.is_counterpart`) the leave-one-out found
+    between the look-alike ``pairs`` of rooms: per query in one of them, the places of the
+    other that its view verified on a counterpart's share of its keypoints (place ids, each pair
+    once, lower id first). A place that was not queried (a map of more than ``MAX_QUERIES``
+    places) may still be found as another's counterpart."""
+    twins: dict[str, set[str]] = {}
+    for a, b in pairs:
+        twins.setdefault(a, set()).add(b)
+        twins.setdefault(b, set()).add(a)
+    found: set[tuple[int, int]] = set()
+    for query in queries:
+        keypoints = loaded.table.fingerprint(query.table_index).n
+        own_id = int(loaded.table.place_ids[query.table_index])
+        for item in query.evidence:
+            if item.room in twins.get(query.room, ()) and is_counterpart(item.inliers, keypoints):
+                found.add((min(own_id, item.place_id), max(own_id, item.place_id)))
+    return tuple(sorted(found))
 
 
 def calibrate(
@@ -142,9 +177,15 @@ def _calibrate_with(
     room_sizes = Counter(loaded.table.rooms)
     queries = []
     count = (prior or RatioLikelihood()).count
-    for query in leave_one_out_counts(loaded, params, max_queries, count=count):
+    for query in leave_one_out(loaded, params, max_queries, count=count):
         queries.append(query)
         if on_query is not None:
             on_query()
-    samples = CalibrationSamples.from_queries(queries, room_sizes)
-    return fit_ratio_likelihood(samples, prior), samples
+    samples = CalibrationSamples.from_queries(((q.room, q.counts) for q in queries), room_sizes)
+    model = fit_ratio_likelihood(samples, prior)
+    if not samples.lookalike_pairs:
+        return model, samples
+    counterparts = counterpart_pairs(loaded, queries, samples.lookalike_pairs)
+    fit = dict(model.fit) | {"n_counterparts": float(len(counterparts))}
+    model = replace(model, lookalikes=samples.lookalike_pairs, counterparts=counterparts, fit=fit)
+    return model, samples

@@ -125,7 +125,9 @@ class RatioLikelihood:
     the clip of the log ratio. ``fit``: how it was fitted (sample sizes, medians and quantiles
     of the counts; empty for the defaults), for ``toploc map info`` and the docs.
     ``count``: what is counted of each place (:data:`COUNTS`); a model stored before the
-    coverage existed reads ``inliers``.
+    coverage existed reads ``inliers``. ``lookalikes``: the pairs of look-alike rooms the
+    leave-one-out found, ``counterparts``: the pairs of their places (ids) at the same spot of
+    both (:mod:`localizer.lookalikes`; both empty for a model stored before them).
 
     The defaults (used for a map that cannot be calibrated: fewer than two places in every room,
     and the prior the fit is pulled towards) are the fit on the bare rendered ``house`` (35
@@ -154,6 +156,8 @@ class RatioLikelihood:
     motion: str = "general"
     fit: Mapping[str, float] = field(default_factory=dict)
     count: str = "spread"
+    lookalikes: tuple[tuple[str, str], ...] = ()
+    counterparts: tuple[tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         if self.count not in COUNTS:
@@ -179,10 +183,22 @@ class RatioLikelihood:
 
     def from_room_inliers(self, room_inliers: np.ndarray) -> np.ndarray:
         """Likelihood per room (sums to 1) from the best inlier count per room, shape (N,)."""
+        return self.from_counts(room_inliers)
+
+    def from_counts(
+        self,
+        room_inliers: np.ndarray,
+        aliased: Sequence[Sequence[int]] = (),
+        compared: Sequence[Sequence[int]] = (),
+    ) -> np.ndarray:
+        """Likelihood per room (sums to 1) from the best count per room, shape (N,); the rooms
+        of each ``aliased`` group of look-alikes (room indices, :mod:`localizer.lookalikes`)
+        are weighed as equally likely, those of each ``compared`` group (read on
+        counterparts) at most :data:`MAX_TWIN_LOG_RATIO` apart (:func:`lookalike_log_ratios`)."""
         counts = _check_counts(room_inliers)
         if counts.max() < self.min_inliers:
             return np.full(counts.size, 1.0 / counts.size)
-        return softmax(self.log_ratio(counts))  # the ratios, normalised without overflow
+        return softmax(lookalike_log_ratios(self.log_ratio(counts), aliased, compared))
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict (stored in the map)."""
@@ -197,6 +213,8 @@ class RatioLikelihood:
             "motion": self.motion,
             "fit": dict(self.fit),
             "count": self.count,
+            "lookalikes": [list(pair) for pair in self.lookalikes],
+            "counterparts": [list(pair) for pair in self.counterparts],
         }
 
     @classmethod
@@ -217,6 +235,8 @@ class RatioLikelihood:
                 motion=str(data.get("motion", "general")),
                 fit={str(k): float(v) for k, v in dict(data.get("fit", {})).items()},
                 count=str(data.get("count", "inliers")),
+                lookalikes=tuple((str(a), str(b)) for a, b in list(data.get("lookalikes", []))),
+                counterparts=tuple((int(a), int(b)) for a, b in list(data.get("counterparts", []))),
             )
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f"bad stored likelihood {dict(data)}: {error}") from error
@@ -255,6 +275,9 @@ class CalibrationSamples:
     other_room: np.ndarray
     max_other: np.ndarray
     n_lookalike: int = 0
+    lookalike_pairs: tuple[tuple[str, str], ...] = ()
+    """The look-alike rooms found, each pair once (sorted names): the query's room and a room
+    that explained it as a look-alike."""
 
     @classmethod
     def from_queries(
@@ -271,11 +294,17 @@ class CalibrationSamples:
         other: list[float] = []
         max_other: list[float] = []
         n_lookalike = 0
+        pairs: set[tuple[str, str]] = set()
         for own_room, best in queries:
             own = float(best.get(own_room, 0.0))
             has_own = room_sizes.get(own_room, 0) >= 2
             others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
             bar = max(lookalike_min_inliers, lookalike_fraction * own)
+            pairs |= {
+                (min(own_room, room), max(own_room, room))
+                for room in room_sizes
+                if room != own_room and float(best.get(room, 0.0)) >= bar
+            }
             lookalikes = [count for count in others if count >= bar]
             if lookalikes:
                 n_lookalike += len(lookalikes)
@@ -289,7 +318,9 @@ class CalibrationSamples:
             unseen = [count for count in others if count < seen_bar]
             if unseen:
                 max_other.append(max(unseen))
-        return cls(np.array(same), np.array(other), np.array(max_other), n_lookalike)
+        return cls(
+            np.array(same), np.array(other), np.array(max_other), n_lookalike, tuple(sorted(pairs))
+        )
 
 
 INLIER_SCALE = 100.0
@@ -359,6 +390,35 @@ def fit_ratio_likelihood(
         min_inliers=min_inliers,
         fit=fit,
     )
+
+
+MAX_TWIN_LOG_RATIO = math.log(4.0)
+"""The most one frame read on counterparts moves the odds of two look-alike rooms: a factor of
+4, so that no single frame makes twins sure (localized asks for 10) and two frames from
+different spots can. Counterparts recorded by hand stand a few decimetres apart, and a frame
+near one of them favours its room by that offset alone (0.2 m cost a third of the inliers in
+``building``; on held-out recorded maps, uncapped, 2 of 20 first looks came out sure and
+wrong that way)."""
+
+
+def lookalike_log_ratios(
+    log_ratios: np.ndarray,
+    aliased: Sequence[Sequence[int]] = (),
+    compared: Sequence[Sequence[int]] = (),
+) -> np.ndarray:
+    """Per-room log ratios with each ``aliased`` group of look-alike rooms (room indices) at
+    its best member's: the frame says the group is there as strongly as its best count says,
+    and nothing about which of its rooms (their counts say which has a stored place nearer the
+    robot). In each ``compared`` group no room falls more than :data:`MAX_TWIN_LOG_RATIO`
+    below the group's best. Rooms in no group keep their log ratio."""
+    out = np.array(log_ratios, dtype=float)
+    for group in aliased:
+        members = list(group)
+        out[members] = out[members].max()
+    for group in compared:
+        members = list(group)
+        out[members] = np.maximum(out[members], out[members].max() - MAX_TWIN_LOG_RATIO)
+    return out
 
 
 def room_inliers(evidence: Iterable[PlaceScore], rooms: Sequence[str], *, count: str) -> np.ndarray:

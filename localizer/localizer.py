@@ -23,7 +23,8 @@ from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateT
 from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
 from localizer.features import extract_with_camera, matching_overrides
-from localizer.likelihood import Likelihood, RatioLikelihood, room_likelihood
+from localizer.likelihood import Likelihood, RatioLikelihood, room_inliers, room_likelihood
+from localizer.lookalikes import EXACT_COUNTERPART_SHARE, lookalike_groups, twin_counts
 from localizer.policy import PlaceSimilarity
 from localizer.retrieval import PlaceIndex
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
@@ -137,11 +138,14 @@ class LoadedMap:
 
 @dataclass(frozen=True)
 class Observation:
-    """One panorama seen by the localizer: its fingerprint, its evidence and the timings (ms)."""
+    """One panorama seen by the localizer: its fingerprint, its evidence and the timings (ms);
+    ``at_place``: the place the robot homed to before capturing it (None: it was not driven
+    to one; see :func:`localizer.lookalikes.twin_counts`)."""
 
     fingerprint: Fingerprint
     evidence: QueryEvidence
     timing_ms: Mapping[str, float]
+    at_place: int | None = None
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
@@ -174,6 +178,16 @@ class Localizer:
         )
         calibrated = self.likelihood if isinstance(self.likelihood, RatioLikelihood) else None
         self.evidence_params = _resolved(self.config.evidence, calibrated)
+        pairs = calibrated.lookalikes if calibrated is not None else ()
+        self.lookalike_groups = lookalike_groups(pairs, loaded.rooms)
+        self.lookalikes: dict[str, frozenset[str]] = {}
+        for a, b in pairs:
+            self.lookalikes[a] = self.lookalikes.get(a, frozenset()) | {b}
+            self.lookalikes[b] = self.lookalikes.get(b, frozenset()) | {a}
+        self.counterparts: dict[int, frozenset[int]] = {}
+        for p, q in calibrated.counterparts if calibrated is not None else ():
+            self.counterparts[p] = self.counterparts.get(p, frozenset()) | {q}
+            self.counterparts[q] = self.counterparts.get(q, frozenset()) | {p}
         # a query is extracted as the map's places were: their equalisation and keypoint cap
         self._overrides = matching_overrides(loaded.table.params[0]) if loaded.table.params else {}
 
@@ -227,9 +241,39 @@ class Localizer:
         timing = {"extraction": extraction_ms, **evidence.timing_ms}
         return Observation(fingerprint, evidence, timing)
 
+    def frame_likelihood(self, observation: Observation) -> np.ndarray:
+        """One frame's likelihood per room (order of the map's rooms, sums to 1); look-alike
+        rooms the map's calibration found are read on counterparts, or weighed as equally
+        likely where the frame has none (:mod:`localizer.lookalikes`)."""
+        model, evidence = self.likelihood, observation.evidence.places
+        if not self.lookalike_groups or not isinstance(model, RatioLikelihood):
+            return room_likelihood(evidence, self.map.rooms, model)
+        counts, aliased = twin_counts(
+            evidence,
+            self.map.rooms,
+            room_inliers(evidence, self.map.rooms, count=model.count),
+            self.lookalike_groups,
+            model.counterparts,
+            count=model.count,
+            at_place=self._inexact_counterpart(observation.at_place),
+        )
+        compared = [group for group in self.lookalike_groups if group not in aliased]
+        return model.from_counts(counts, aliased, compared)
+
+    def _inexact_counterpart(self, place_id: int | None) -> int | None:
+        """``place_id`` if one of its counterparts stands off its spot (they verify each other
+        on less than :data:`~localizer.lookalikes.EXACT_COUNTERPART_SHARE`), else None."""
+        if place_id is None or place_id not in self.counterparts:
+            return None
+        keypoints = self.map.fingerprint(place_id).n
+        for partner in self.counterparts[place_id]:
+            if self._pair_inliers(place_id, partner) < EXACT_COUNTERPART_SHARE * keypoints:
+                return place_id
+        return None
+
     def update(self, observation: Observation) -> RoomBelief:
         """Fold an observation into the belief (Bayes update) and return the new belief."""
-        likelihood = room_likelihood(observation.evidence.places, self.map.rooms, self.likelihood)
+        likelihood = self.frame_likelihood(observation)
         self.filter.update(likelihood)
         self.latest = observation
         return self.belief()

@@ -80,11 +80,16 @@ class PolicyContext:
     missing, the position of the room's best-matching place in the latest evidence is used.
     ``similarity``: stored-view similarity on demand (the separating policy needs it; matching
     stored views costs time, so a policy asks for just the entries it reads).
+    ``lookalikes``: per room, the rooms the map's calibration found it looks like;
+    ``counterparts``: per place id, the places of its look-alike rooms at the same spot of their
+    frames (:mod:`localizer.lookalikes`).
     """
 
     tried: frozenset[int] = frozenset()
     position_xy_m_by_room: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     similarity: SimilarityFunction | None = None
+    lookalikes: Mapping[str, frozenset[str]] = field(default_factory=dict)
+    counterparts: Mapping[int, frozenset[int]] = field(default_factory=dict)
 
     def trying(self, place_id: int) -> PolicyContext:
         """The same context with ``place_id`` added to ``tried``."""
@@ -155,19 +160,22 @@ def separating_pairs(
     tried: AbstractSet[int],
     min_rival_probability: float = 0.02,
     min_room_probability: float = 0.0,
+    lookalikes: Mapping[str, frozenset[str]] | None = None,
 ) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """``(candidates, rival places)``: the rows and columns of :class:`PlaceSimilarity` that
     :meth:`DiscriminativePolicy.choose` reads for ``belief`` (``{room: probability}``), so the
-    similarity function need compute no more; both empty when there is nothing left to try."""
+    similarity function need compute no more; both empty when there is nothing left to try.
+    The candidates are the untried places of the most likely room and of its ``lookalikes``
+    among the rivals (a drive to either twin's counterpart place tells them apart)."""
     target = _target_room(belief, places, tried, min_room_probability)
     if target is None:
         return (), ()
     room, candidates = target
     rivals = _rivals(belief, room, min_rival_probability)
-    return (
-        tuple(c.id for c in candidates),
-        tuple(p.id for p in places if p.room in rivals),
-    )
+    twins = set((lookalikes or {}).get(room, frozenset())) & set(rivals)
+    candidates = candidates + [p for p in places if p.room in twins and p.id not in tried]
+    columns = [p.id for p in places if p.room in rivals or (twins and p.room == room)]
+    return tuple(c.id for c in candidates), tuple(columns)
 
 
 @dataclass
@@ -218,6 +226,16 @@ class DiscriminativePolicy:
     separation, so among equally separating places the nearest wins, and a place 5 m further
     must separate 10 points better. Ties: more inliers in the evidence, then lower place id.
     With no rivals it falls back to the nearest place (``separation`` is 1 for all).
+
+    A rival that is a look-alike of ``R`` (context ``lookalikes``) adds its untried places to
+    the candidates (scored with their own room as the hypothesis), and is compared on
+    counterparts only: ``max_q`` runs over ``c``'s counterparts in it (context
+    ``counterparts``), and a place without one has confusion 1 against it. A view of one twin
+    taken where the other twin has no stored view shares little with the other twin's views,
+    yet tells nothing about which twin the robot is in (on recorded maps every place rated
+    0.75–0.94 without this, issue 19); at a counterpart the frame is compared with both twins'
+    views of one spot. When no candidate separates at all (twins without counterparts), there
+    is nothing to drive to: ``None``.
     """
 
     name: ClassVar[str] = "separating"
@@ -236,45 +254,36 @@ class DiscriminativePolicy:
             raise ValueError("the separating policy needs a view similarity in its context")
         probabilities = belief.as_dict()
         inliers = _inliers_by_place(evidence)
-        target = _target_room(probabilities, places, context.tried, self.min_room_probability)
-        if target is None:
-            return None
-        room, candidates = target
         rows, columns = separating_pairs(
             probabilities,
             places,
             context.tried,
             self.min_rival_probability,
             self.min_room_probability,
+            context.lookalikes,
         )
+        if not rows:
+            return None
+        by_id = {p.id: p for p in places}
+        candidates = [by_id[place_id] for place_id in rows]
         similarity = context.similarity(rows, columns)
-        here = _position_in_room(room, places, inliers, context)
+        separations = [
+            self.separation(similarity, c.id, c.room, probabilities, places, context)
+            for c in candidates
+        ]
+        if max(separations) <= 0.0:
+            return None
         scored = [
             (
-                self.score(similarity, c, room, probabilities, places, here),
+                separation
+                - self.travel_cost_per_m
+                * _distance_m(_position_in_room(c.room, places, inliers, context), c),
                 inliers.get(c.id, 0),
                 -c.id,
             )
-            for c in candidates
+            for separation, c in zip(separations, candidates, strict=True)
         ]
         return -max(scored)[2]
-
-    def score(
-        self,
-        similarity: PlaceSimilarity,
-        candidate: Place,
-        room: str,
-        belief: Mapping[str, float],
-        places: Sequence[Place],
-        here_xy_m: tuple[float, float] | None,
-    ) -> float:
-        """``separation - travel_cost_per_m * distance_m`` of ``candidate`` under hypothesis
-        ``room`` (see the class docstring)."""
-        distance_m = 0.0
-        if here_xy_m is not None and candidate.xy_m is not None:
-            distance_m = math.dist(here_xy_m, candidate.xy_m)
-        separation = self.separation(similarity, candidate.id, room, belief, places)
-        return separation - self.travel_cost_per_m * distance_m
 
     def separation(
         self,
@@ -283,6 +292,7 @@ class DiscriminativePolicy:
         room: str,
         belief: Mapping[str, float],
         places: Sequence[Place],
+        context: PolicyContext | None = None,
     ) -> float:
         """``1 - confusion`` of ``place_id`` against the rivals of ``room`` (in [0, 1])."""
         row = similarity.inliers[similarity.index(place_id)]
@@ -293,12 +303,28 @@ class DiscriminativePolicy:
             return 1.0
         if own <= 0:
             return 0.0
+        context = context or PolicyContext()
+        twins = context.lookalikes.get(room, frozenset())
+        counterparts = context.counterparts.get(place_id, frozenset())
         confusion = 0.0
         for rival, p in rivals.items():
-            columns = [similarity.index(q.id) for q in places if q.room == rival]
+            in_rival = [q.id for q in places if q.room == rival]
+            if rival in twins:
+                in_rival = [q for q in in_rival if q in counterparts]
+                if not in_rival:
+                    confusion += p / total  # a view no twin's view shares a spot with
+                    continue
+            columns = [similarity.index(q) for q in in_rival]
             if columns:
                 confusion += (p / total) * min(1.0, float(row[columns].max()) / own)
         return 1.0 - confusion
+
+
+def _distance_m(here_xy_m: tuple[float, float] | None, place: Place) -> float:
+    """Metres from ``here_xy_m`` to ``place`` (same room frame), 0 if either is unknown."""
+    if here_xy_m is None or place.xy_m is None:
+        return 0.0
+    return math.dist(here_xy_m, place.xy_m)
 
 
 def _position_in_room(

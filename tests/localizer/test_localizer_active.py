@@ -57,11 +57,55 @@ class BlindRobot:
         """Moves are instantaneous here: nothing to stop."""
 
 
-def test_a_robot_that_sees_nothing_is_lost_and_does_not_drive(localizer):
+def test_a_lost_robot_steps_away_and_looks_again_before_it_gives_up(localizer):
     robot = BlindRobot()
-    result = localize_actively(localizer, robot, "most-likely")
+    result = localize_actively(localizer, robot, "most-likely", ActiveParams(lost_looks=3))
     assert result.final.state is LocalizationState.LOST
-    assert robot.moves == 0 and result.visits == ()
+    assert robot.moves == result.looks_elsewhere == 3
+    assert result.visits == () and result.frames == 4
+
+
+def test_a_lost_robot_allowed_no_look_elsewhere_does_not_move(localizer):
+    robot = BlindRobot()
+    result = localize_actively(localizer, robot, "most-likely", ActiveParams(lost_looks=0))
+    assert result.final.state is LocalizationState.LOST and robot.moves == 0
+
+
+def test_a_robot_woken_facing_nothing_finds_its_room_a_step_away(localizer):
+    robot = StepAwayRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "kitchen", seed=3, camera=CAMERA)
+    )
+    result = localize_actively(localizer, robot, "separating")
+    assert result.first.state is LocalizationState.LOST
+    assert result.looks_elsewhere == 1
+    assert result.final.top[0] == "kitchen" and result.final.state is not LocalizationState.LOST
+
+
+class StepAwayRobot:
+    """A simulated robot whose camera is covered until it first moves (woken facing a wall)."""
+
+    def __init__(self, robot: SimulatedRobot) -> None:
+        self.robot, self.moved = robot, False
+
+    def capture(self) -> Capture:
+        if self.moved:
+            return self.robot.capture()
+        return Capture(np.full((96, 512, 3), 128, np.uint8), 0.0, "covered")
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self.moved = True
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self) -> Pose2D:
+        return self.robot.odometry()
+
+    def stop(self) -> None:
+        self.robot.stop()
+
+
+def test_active_params_refuse_a_negative_budget():
+    with pytest.raises(ValueError, match="lost_looks must be >= 0"):
+        ActiveParams(lost_looks=-1)
 
 
 def test_no_targets_allowed_means_no_drive(localizer):

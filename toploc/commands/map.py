@@ -38,7 +38,12 @@ from mapdb.dataset import (
 from mapdb.errors import MapDatabaseError
 from mapdb.graph import connect_known_rooms, export_graphml
 from mapdb.records import check_name
-from toploc.commands.map_text import describe_likelihood, explain_likelihood, format_info
+from toploc.commands.map_text import (
+    describe_likelihood,
+    explain_likelihood,
+    format_info,
+    lookalike_lines,
+)
 from toploc.commands.options import camera_option, db_option
 from toploc.commands.record import record_command
 from toploc.extraction import map_overrides, resolve_extractor
@@ -367,6 +372,10 @@ def _calibrate(
             raise click.ClickException(str(error)) from error
         took = f" ({time.monotonic() - started_s:.1f} s)"
         click.echo(f"{explain_likelihood(detector, model)}{took}")
+        with MapDatabase.open(db_path, readonly=True) as map_db:
+            room_of = {place.id: place.room for place in map_db.places()}
+        for line in lookalike_lines(model, room_of):
+            click.echo(line)
         if formula:
             click.echo(f"  {detector} likelihood: {describe_likelihood(model)}")
 
@@ -392,7 +401,8 @@ def info_command(db_path: Path, as_json: bool) -> None:
     """Rooms, places per room, fingerprints per detector, edges and file size."""
     with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
         info = map_db.info()
-    click.echo(json.dumps(info.to_json(), indent=2) if as_json else format_info(info))
+        room_of = {place.id: place.room for place in map_db.places()}
+    click.echo(json.dumps(info.to_json(), indent=2) if as_json else format_info(info, room_of))
 
 
 @map_group.command("export")

@@ -4,7 +4,10 @@ in ``map info`` and with ``-v`` (:func:`describe_likelihood`). Pure: text from r
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from localizer.likelihood import RatioLikelihood
+from localizer.lookalikes import pairs_without_counterparts
 from mapdb.records import MapInfo
 
 
@@ -47,7 +50,36 @@ def explain_likelihood(detector: str, model: RatioLikelihood) -> str:
     )
 
 
-def format_info(info: MapInfo) -> str:
+def lookalike_lines(model: RatioLikelihood, room_of: Mapping[int, str]) -> list[str]:
+    """What the calibration found of look-alike rooms (:mod:`localizer.lookalikes`), and for
+    twins without counterparts what to record so that they can be told apart; ``room_of``:
+    each place id's room."""
+    if not model.lookalikes:
+        return []
+    blind = pairs_without_counterparts(model.lookalikes, model.counterparts, room_of)
+    lines = []
+    told = [pair for pair in model.lookalikes if pair not in blind]
+    if told:
+        lines.append(
+            f"  look-alike rooms: {_pairs(told)}; some of their places stand at the same spots "
+            "(counterparts): a frame there, or a drive to one, tells them apart"
+        )
+    if blind:
+        lines.append(
+            f"  look-alike rooms: {_pairs(blind)}; none of their places stand at the same spot "
+            "of both, so a frame cannot tell them apart (they stay ambiguous). Record two "
+            "places in each of them at the same two spots (the same distances from the same "
+            "corner, e.g. 1 m inside the door and the middle); an active localization then "
+            "drives there and tells them apart"
+        )
+    return lines
+
+
+def _pairs(pairs: list[tuple[str, str]] | tuple[tuple[str, str], ...]) -> str:
+    return ", ".join(f"{a} ~ {b}" for a, b in pairs)
+
+
+def format_info(info: MapInfo, room_of: Mapping[int, str] | None = None) -> str:
     """``map info``'s text: rooms and places, fingerprints, edges, each likelihood's formula."""
     single = [room.name for room in info.rooms if room.n_places == 1]
     hint = (
@@ -59,6 +91,8 @@ def format_info(info: MapInfo) -> str:
         if single
         else []
     )
+    models = [RatioLikelihood.from_json(model) for model in info.likelihoods.values()]
+    lookalikes = lookalike_lines(models[0], room_of or {}) if models else []
     lines = [
         f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
         f"{len(info.rooms)} rooms, {info.n_places} places",
@@ -77,4 +111,4 @@ def format_info(info: MapInfo) -> str:
     ]
     if not info.likelihoods:
         lines[-1] += " not calibrated (toploc map calibrate)"
-    return "\n".join(lines)
+    return "\n".join(lines + lookalikes)

@@ -20,32 +20,56 @@ from localizer.active import ActiveParams, ActiveResult, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import Localizer, LocalizerConfig
 from robot.worlds import make_world
+from toploc.evaluation.localization import count_outcomes
+from toploc.evaluation.reliability import reliability
 from toploc.maps import ensure_world_map, kidnapped_robot, load_map
 
 # The rooms a kidnapped robot is put in, per world: its look-alike rooms.
-KIDNAP_ROOMS = {"building": ("office_a", "office_b")}
+KIDNAP_ROOMS = {
+    "building": ("office_a", "office_b"),
+    "house": ("bedroom_a", "bedroom_b", "bathroom_a", "bathroom_b"),
+}
 
 
 @dataclass(frozen=True)
 class Trial:
-    """One kidnapping: where the robot really was and how localization ended (wall seconds)."""
+    """One kidnapping: the room the robot was put in, how localization ended (wall seconds),
+    and the room the robot really was in at the end (``end_room``; a drive may leave the room it
+    was put in, and the final belief is judged against where the robot is then; ``None``: the
+    room it was put in)."""
 
     trial: int
     true_room: str
     result: ActiveResult
     seconds: float
+    end_room: str | None = None
+
+    @property
+    def final_true_room(self) -> str:
+        """The room the robot was in when the final belief was formed."""
+        return self.end_room or self.true_room
 
     @property
     def success(self) -> bool:
         """Localized, and in the right room."""
+        return self.outcome == "right_localized"
+
+    @property
+    def outcome(self) -> str:
+        """Which of the five outcomes (:data:`toploc.evaluation.localization.OUTCOMES`) the
+        final belief is."""
         final = self.result.final
-        return final.state is LocalizationState.LOCALIZED and final.top[0] == self.true_room
+        if final.state is LocalizationState.LOST:
+            return "lost"
+        right = "right" if final.top[0] == self.final_true_room else "wrong"
+        return f"{right}_{final.state}"
 
     def describe(self) -> str:
         """One line: true room, final belief, steps, distance (m), frames, ok or FAILED."""
         result, final = self.result, self.result.final
+        moved = "" if self.final_true_room == self.true_room else f" (ended in {self.end_room})"
         return (
-            f"trial {self.trial:2d}: in {self.true_room:9s} -> {final.top[0]:9s} "
+            f"trial {self.trial:2d}: in {self.true_room:9s}{moved} -> {final.top[0]:9s} "
             f"p={final.top[1]:.3f} {final.state!s:9s} steps {len(result.visits)} "
             f"{result.distance_m:5.2f} m {result.frames:3d} frames "
             f"{'ok' if self.success else 'FAILED'}"
@@ -56,6 +80,7 @@ class Trial:
         return {
             "trial": self.trial,
             "true_room": self.true_room,
+            "end_room": self.final_true_room,
             "first_belief": self.result.first.to_json(),
             "final_belief": final.to_json(),
             "final_room": final.top[0],
@@ -65,16 +90,23 @@ class Trial:
             "homing": [v.homing.reason for v in self.result.visits],
             "distance_m": self.result.distance_m,
             "frames": self.result.frames,
+            "looks_elsewhere": self.result.looks_elsewhere,
             "success": self.success,
+            "outcome": self.outcome,
             "seconds": self.seconds,
         }
 
 
 def totals(trials: list[Trial]) -> dict[str, Any]:
-    """Success rate, first-look accuracy and means over the trials."""
+    """Success rate, the five outcomes, first-look accuracy, means over the trials, and the
+    reliability of the final answers' stated probabilities."""
     n = len(trials)
+    finals = [t.result.final for t in trials]
+    stated = [final.top[1] for final in finals]
+    right = [final.top[0] == t.final_true_room for final, t in zip(finals, trials, strict=True)]
     return {
         "trials": n,
+        "outcomes": count_outcomes(t.outcome for t in trials),
         "success_rate": sum(t.success for t in trials) / n,
         "first_look_right": sum(t.result.first.top[0] == t.true_room for t in trials) / n,
         "first_look_ambiguous": sum(
@@ -85,6 +117,8 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
         "mean_distance_m": statistics.fmean(t.result.distance_m for t in trials),
         "mean_frames": statistics.fmean(t.result.frames for t in trials),
         "mean_seconds": statistics.fmean(t.seconds for t in trials),
+        "drove": sum(bool(t.result.visits) for t in trials),
+        "reliability": reliability(stated, right).to_json(),
     }
 
 
@@ -124,6 +158,8 @@ def run_kidnappings(
     max_targets: int = 4,
     progress: bool = True,
     on_trial: Callable[[Trial], None] | None = None,
+    world_seed: int = 0,
+    rooms: tuple[str, ...] | None = None,
 ) -> KidnapRun:
     """Kidnap the simulated robot into the look-alike rooms of ``world`` (``KIDNAP_ROOMS``, in
     turn), ``trials`` times, and localize actively with ``policy``.
@@ -132,13 +168,14 @@ def run_kidnappings(
     :func:`toploc.maps.ensure_world_map`); trial ``i`` is seeded with ``seed * 100_000 + i``;
     ``condition`` is the robot camera's capture condition; ``motion_noise`` the fraction of each
     turn and drive; ``max_targets`` the most places driven to. ``on_trial`` is called after each
-    trial (for logging; use ``tqdm.write`` to print under the progress bar).
+    trial (for logging; use ``tqdm.write`` to print under the progress bar). ``world_seed``
+    builds the world (the seed its map was made in); ``rooms`` replaces ``KIDNAP_ROOMS``.
     """
-    db = db_path or ensure_world_map(world)
+    db = db_path or ensure_world_map(world, seed=world_seed)
     localizer = Localizer(load_map(db), LocalizerConfig())
-    scene_world = make_world(world)
+    scene_world = make_world(world, world_seed)
     params = ActiveParams(max_targets=max_targets)
-    rooms = KIDNAP_ROOMS[world]
+    rooms = rooms or KIDNAP_ROOMS[world]
     done: list[Trial] = []
     for i in tqdm(range(trials), desc=f"kidnap/{policy}", unit="trial", disable=not progress):
         true_room = rooms[i % len(rooms)]
@@ -147,7 +184,7 @@ def run_kidnappings(
         )
         start = time.perf_counter()
         result = localize_actively(localizer, robot, policy, params)
-        trial = Trial(i, true_room, result, time.perf_counter() - start)
+        trial = Trial(i, true_room, result, time.perf_counter() - start, robot.true_room())
         done.append(trial)
         if on_trial is not None:
             on_trial(trial)

@@ -1,0 +1,182 @@
+"""Benchmark the whole loop on maps recorded the way users record them (issue 19, section 1).
+
+Per world and ``K`` (places per room): a map is recorded in the rendered world as the README's
+loop records one (:mod:`toploc.evaluation.recorded_maps`: K places per room, a random turn and
+a short drive between two, the robot's odometry as the pose, the world's doors as edges, then
+calibrated), and the simulated robot is kidnapped ``--trials`` times into the world's look-alike
+rooms (``building``: office_a/office_b; ``house``: the twin bedrooms and bathrooms) and localizes
+actively (:func:`toploc.evaluation.kidnap.run_kidnappings`).
+
+Reported per map: the five outcomes of the first look (a single frame off the map's places)
+and of the final belief, how many trials drove, the mean drives and distance, seconds per
+trial, and the reliability of the final answers (of those stated at >= 0.9, how many right;
+the Brier score). Recorded maps are cached under ``--cache-dir`` (delete it to re-record).
+
+Held out: choices of toploc's likelihood and policy are made on world seed 0 with record seeds
+0 and 1; ``--world-seed 1`` (other textures and posters) with ``--record-seed 2`` is the data no
+choice was made on.
+
+    python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
+        [--trials 20] [--record-seed 0] [--world-seed 0] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from localizer.lookalikes import pairs_without_counterparts
+from robot.worlds import make_world
+from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, run_kidnappings
+from toploc.evaluation.localization import OUTCOMES, count_outcomes
+from toploc.evaluation.recorded_maps import record_counterparts, record_map
+from toploc.maps import cache_dir, calibrate_map, load_map
+
+SHORT = {
+    "right_localized": "R+L",
+    "right_ambiguous": "R+A",
+    "wrong_localized": "W+L",
+    "wrong_ambiguous": "W+A",
+    "lost": "lost",
+}
+
+
+def first_outcome(trial: Trial) -> str:
+    """The outcome of the trial's first look (before any drive)."""
+    first = trial.result.first
+    if str(first.state) == "lost":
+        return "lost"
+    return f"{'right' if first.top[0] == trial.true_room else 'wrong'}_{first.state}"
+
+
+def recorded_db(
+    cache: Path, world: str, world_seed: int, places: int, record_seed: int, advised: bool
+) -> Path:
+    """The cached recorded map (recorded if missing), calibrated again by the code being
+    measured; ``advised``: then two places at the same two spots of each look-alike pair's
+    rooms, as ``toploc map info`` advises."""
+    name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{'-advised' if advised else ''}"
+    db = cache / name / "map.db"
+    start = time.perf_counter()
+    if not db.exists():
+        db.parent.mkdir(parents=True, exist_ok=True)
+        scene = make_world(world, world_seed)
+        record_map(scene, places, record_seed, db, progress=True)
+        if advised:
+            loaded = load_map(db)
+            if loaded.likelihood is not None:
+                room_of = {place.id: place.room for place in loaded.places}
+                likelihood = loaded.likelihood
+                pairs = pairs_without_counterparts(
+                    likelihood.lookalikes, likelihood.counterparts, room_of
+                )
+                record_counterparts(scene, pairs, record_seed, db)
+        print(f"recorded {db} in {time.perf_counter() - start:.0f} s")
+    else:
+        calibrate_map(db)
+        print(f"calibrated {db} in {time.perf_counter() - start:.0f} s")
+    return db
+
+
+def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]:
+    db = recorded_db(
+        Path(args.cache_dir), world, args.world_seed, places, args.record_seed, args.advised
+    )
+
+    def show(trial: Trial) -> None:
+        if args.verbose:
+            print(f"  {trial.describe()}  first {first_outcome(trial)}")
+
+    run = run_kidnappings(
+        world,
+        args.trials,
+        policy=args.policy,
+        seed=args.record_seed,
+        db_path=db,
+        world_seed=args.world_seed,
+        progress=False,
+        on_trial=show,
+    )
+    totals = run.totals()
+    totals["first_outcomes"] = count_outcomes(first_outcome(t) for t in run.trials)
+    likelihood = load_map(db).likelihood
+    lookalikes = {
+        "lookalikes": [list(p) for p in likelihood.lookalikes] if likelihood else [],
+        "counterparts": len(likelihood.counterparts) if likelihood else 0,
+    }
+    row = {"world": world, "places_per_room": places, "advised": args.advised, "db": str(db)}
+    return row | lookalikes | {"run": run.to_json(), "totals": totals}
+
+
+def confident(totals: dict[str, Any]) -> str:
+    """``right/n`` of the answers stated at >= 0.9."""
+    bins = [b for b in totals["reliability"]["bins"] if b["low"] >= 0.9 and b["n"]]
+    n = sum(b["n"] for b in bins)
+    right = sum(round(b["n"] * b["fraction_right"]) for b in bins)
+    return f"{right}/{n}"
+
+
+def print_table(rows: list[dict[str, Any]]) -> None:
+    names = " ".join(f"{SHORT[o]:>4s}" for o in OUTCOMES)
+    print(
+        f"| world | K | first look {names} | final {names} | drove | drives | m | s "
+        "| >=0.9 right | Brier |"
+    )
+    for row in rows:
+        t = row["totals"]
+        first = " ".join(f"{t['first_outcomes'][o]:4d}" for o in OUTCOMES)
+        final = " ".join(f"{t['outcomes'][o]:4d}" for o in OUTCOMES)
+        print(
+            f"| {row['world']} | {row['places_per_room']}{'+2' if row['advised'] else ''} "
+            f"| {first} | {final} | "
+            f"{t['drove']}/{t['trials']} | {t['mean_steps']:.2f} | {t['mean_distance_m']:.2f} | "
+            f"{t['mean_seconds']:.1f} | {confident(t)} | {t['reliability']['brier']:.3f} |"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", default="building,house")
+    parser.add_argument("--places", default="1,2,3,5", help="places per room, comma-separated")
+    parser.add_argument("--trials", type=int, default=20)
+    parser.add_argument("--policy", default="separating")
+    parser.add_argument("--record-seed", type=int, default=0)
+    parser.add_argument("--world-seed", type=int, default=0)
+    parser.add_argument("--cache-dir", default=str(cache_dir() / "bench-recorded"))
+    parser.add_argument("--json", type=Path)
+    parser.add_argument(
+        "--advised",
+        action="store_true",
+        help="after recording, two more places at two spots of each look-alike pair's rooms",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true")
+    args = parser.parse_args()
+    worlds = args.worlds.split(",")
+    for world in worlds:
+        if world not in KIDNAP_ROOMS:
+            parser.error(
+                f"world {world!r} has no look-alike rooms; choose from {list(KIDNAP_ROOMS)}"
+            )
+    rows = []
+    for world in worlds:
+        for places in (int(k) for k in args.places.split(",")):
+            print(f"{world}, {places} places per room:")
+            rows.append(run_one(args, world, places))
+            print_table(rows[-1:])
+    print()
+    print(
+        f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "
+        f"{args.trials} kidnappings each, policy {args.policy}"
+        f"{', advised (2 counterpart places per look-alike pair)' if args.advised else ''}"
+    )
+    print_table(rows)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+        print(f"wrote {args.json}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,168 @@
+"""Look-alike rooms: their groups, counterparts, and how a frame's counts weigh them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from localizer.likelihood import (
+    MAX_TWIN_LOG_RATIO,
+    RatioLikelihood,
+    lookalike_log_ratios,
+    room_inliers,
+)
+from localizer.lookalikes import (
+    is_counterpart,
+    lookalike_groups,
+    pairs_without_counterparts,
+    twin_counts,
+)
+
+ROOMS = ("corridor", "office_a", "office_b", "kitchen", "bedroom_a", "bedroom_b")
+OFFICES = ((1, 2),)
+
+
+@dataclass(frozen=True)
+class Score:
+    """A place's evidence as the likelihood reads it."""
+
+    place_id: int
+    room: str
+    inliers: int
+
+    @property
+    def spread_inliers(self) -> float:
+        return float(self.inliers)
+
+
+def test_look_alike_pairs_join_into_groups_of_room_indices():
+    pairs = [("office_a", "office_b"), ("bedroom_b", "bedroom_a")]
+    assert lookalike_groups(pairs, ROOMS) == ((1, 2), (4, 5))
+
+
+def test_a_pair_naming_a_room_the_map_lacks_is_left_out():
+    assert lookalike_groups([("office_a", "lab")], ROOMS) == ()
+
+
+def test_pairs_that_share_a_room_make_one_group():
+    pairs = [("office_a", "office_b"), ("office_b", "kitchen")]
+    assert lookalike_groups(pairs, ROOMS) == ((1, 2, 3),)
+
+
+def test_places_at_the_same_spot_of_twin_rooms_are_counterparts():
+    assert is_counterpart(820, 1000)  # the batch map's twin offices: 0.80-0.94 of the keypoints
+    assert not is_counterpart(200, 1000)  # recorded maps' twin places: at most 0.22
+    assert not is_counterpart(0, 0)
+
+
+def test_aliased_twins_are_equally_likely_whatever_their_counts():
+    # office_b's stored place is nearer the robot: 183 against 96 inliers
+    model = RatioLikelihood()
+    counts = np.array([5.0, 96.0, 183.0, 0.0, 0.0, 0.0])
+    aliased = model.from_counts(counts, OFFICES)
+    plain = model.from_counts(counts)
+    assert aliased[1] == pytest.approx(aliased[2])
+    assert plain[2] / plain[1] > 50  # what the counts alone said: localized in office_b
+
+
+def test_a_room_outside_the_group_keeps_its_odds_against_either_twin():
+    model = RatioLikelihood()
+    counts = np.array([150.0, 96.0, 183.0, 0.0, 0.0, 0.0])
+    aliased = model.from_counts(counts, OFFICES)
+    plain = model.from_counts(counts)
+    assert aliased[0] / aliased[1] == pytest.approx(plain[0] / plain[2], rel=1e-9)
+    assert aliased[0] / aliased[2] == pytest.approx(plain[0] / plain[2], rel=1e-9)
+
+
+@given(logs=st.lists(st.floats(-25, 25), min_size=4, max_size=4))
+def test_an_aliased_group_is_as_likely_as_its_best_room_and_no_more(logs):
+    out = lookalike_log_ratios(np.array(logs), ((0, 2, 3),))
+    assert out[0] == out[2] == out[3] == max(logs[0], logs[2], logs[3])
+    assert out[1] == logs[1]
+
+
+def test_twins_are_read_on_the_counterpart_pair_the_frame_verified():
+    # the robot is nearest office_b's place 12, which has no counterpart; office_a's 3 and
+    # office_b's 13 stand at one spot of their frames and the frame verified both
+    evidence = [Score(12, "office_b", 183), Score(3, "office_a", 120), Score(13, "office_b", 90)]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    read, aliased = twin_counts(evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers")
+    assert aliased == ()
+    assert read[1] == 120 and read[2] == 90
+
+
+def test_twins_without_a_verified_counterpart_pair_stay_aliased():
+    evidence = [Score(12, "office_b", 183), Score(3, "office_a", 120)]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    # 3's counterpart 13 was not among the places the frame verified
+    read, aliased = twin_counts(evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers")
+    assert aliased == OFFICES
+    assert list(read) == list(counts)
+
+
+def test_of_several_counterpart_pairs_the_best_matched_is_read():
+    evidence = [
+        Score(3, "office_a", 60),
+        Score(13, "office_b", 70),
+        Score(4, "office_a", 150),
+        Score(14, "office_b", 110),
+    ]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    pairs = [(3, 13), (4, 14)]
+    read, _ = twin_counts(evidence, ROOMS, counts, OFFICES, pairs, count="inliers")
+    assert read[1] == 150 and read[2] == 110
+
+
+def test_look_alikes_and_counterparts_survive_the_map_round_trip():
+    model = RatioLikelihood(lookalikes=(("office_a", "office_b"),), counterparts=((3, 13),))
+    assert RatioLikelihood.from_json(model.to_json()) == model
+
+
+def test_a_model_stored_before_look_alikes_has_none():
+    stored = RatioLikelihood().to_json()
+    del stored["lookalikes"], stored["counterparts"]
+    model = RatioLikelihood.from_json(stored)
+    assert model.lookalikes == () and model.counterparts == ()
+
+
+def test_look_alike_pairs_no_counterpart_joins_are_the_blind_ones():
+    room_of = {3: "office_a", 13: "office_b", 30: "bedroom_a", 31: "bedroom_b"}
+    pairs = [("office_a", "office_b"), ("bedroom_a", "bedroom_b")]
+    assert pairs_without_counterparts(pairs, [(3, 13)], room_of) == (("bedroom_a", "bedroom_b"),)
+
+
+def test_a_frame_at_the_place_driven_to_is_not_read_on_that_place():
+    # homed to office_a's 3: its count beats its counterpart's by how far 13 stands off the spot
+    evidence = [Score(3, "office_a", 150), Score(13, "office_b", 90)]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    _, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers", at_place=3
+    )
+    assert aliased == OFFICES
+
+
+def test_a_frame_at_the_place_driven_to_is_read_on_the_other_pairs():
+    evidence = [
+        Score(3, "office_a", 150),
+        Score(13, "office_b", 90),
+        Score(4, "office_a", 60),
+        Score(14, "office_b", 70),
+    ]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    pairs = [(3, 13), (4, 14)]
+    read, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, pairs, count="inliers", at_place=3
+    )
+    assert aliased == () and (read[1], read[2]) == (60, 70)
+
+
+def test_one_frame_read_on_counterparts_moves_twins_by_at_most_the_cap():
+    model = RatioLikelihood()
+    counts = np.array([5.0, 300.0, 120.0, 0.0, 0.0, 0.0])
+    likelihood = model.from_counts(counts, compared=OFFICES)
+    assert likelihood[1] / likelihood[2] == pytest.approx(math.exp(MAX_TWIN_LOG_RATIO))

@@ -1,0 +1,114 @@
+"""Maps recorded the way users record them: a few places per room, the twins' places at
+different spots of their identical frames; and what the likelihood makes of their twins."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from localizer.belief import LocalizationState
+from localizer.localizer import Localizer
+from mapdb.database import MapDatabase
+from robot.render import PanoramaCamera
+from robot.sim_robot import SimulatedRobot
+from robot.worlds import make_world
+from toploc.evaluation.recorded_maps import record_map
+from toploc.maps import load_map
+
+CAMERA = PanoramaCamera(512, 96)
+ROOMS = ("corridor", "office_a", "office_b")
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """``building``'s corridor and twin offices, two places each, recorded with seed 0."""
+    db = tmp_path_factory.mktemp("recorded") / "map.db"
+    places = record_map(make_world("building"), 2, 0, db, rooms=ROOMS, camera=CAMERA)
+    return db, places
+
+
+def test_a_recorded_map_holds_k_places_per_room_posed_by_the_odometry(recorded):
+    db, places = recorded
+    with MapDatabase.open(db, create=False, readonly=True) as map_db:
+        stored = map_db.places()
+    assert sorted(p.room for p in stored) == sorted(ROOMS * 2)
+    assert [p.id for p in stored] == [p.place_id for p in places]
+    for room in ROOMS:
+        first, second = (p for p in stored if p.room == room)
+        assert (first.x_m, first.y_m, first.heading_deg) == (0.0, 0.0, 0.0)  # odometry starts
+        assert 0.4 < math.hypot(second.x_m, second.y_m) < 1.6  # a short drive later
+
+
+def test_a_recorded_map_connects_the_rooms_its_doors_join_and_is_calibrated(recorded):
+    db, _ = recorded
+    with MapDatabase.open(db, create=False, readonly=True) as map_db:
+        assert sorted(map_db.edges()) == [("corridor", "office_a"), ("corridor", "office_b")]
+        assert map_db.likelihood("sift") is not None
+
+
+def test_a_recording_starts_from_an_empty_file(recorded):
+    db, _ = recorded
+    with pytest.raises(FileExistsError, match="starts from an empty file"):
+        record_map(make_world("building"), 2, 0, db, rooms=ROOMS, camera=CAMERA)
+
+
+def test_a_recording_names_a_room_the_world_lacks(tmp_path):
+    with pytest.raises(ValueError, match=r"no room \['lab'\]"):
+        record_map(make_world("building"), 1, 0, tmp_path / "m.db", rooms=("lab",))
+
+
+def test_twins_recorded_at_different_spots_have_no_counterparts(recorded):
+    likelihood = load_map(recorded[0]).likelihood
+    assert likelihood is not None
+    assert likelihood.lookalikes == (("office_a", "office_b"),)
+    assert likelihood.counterparts == ()
+
+
+def test_twins_mapped_at_the_same_spots_have_counterparts_there(building_map):
+    # the batch map's grid is laid out in each room's frame: the twins' places coincide
+    loaded = load_map(building_map[0])
+    assert loaded.likelihood is not None
+    assert loaded.likelihood.lookalikes == (("office_a", "office_b"),)
+    position = {place.id: (place.room, place.x_m, place.y_m) for place in loaded.places}
+    pairs = loaded.likelihood.counterparts
+    assert pairs
+    for a, b in pairs:
+        (room_a, *spot_a), (room_b, *spot_b) = position[a], position[b]
+        assert {room_a, room_b} == {"office_a", "office_b"}
+        assert spot_a == pytest.approx(spot_b)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_a_frame_from_one_twin_off_the_stored_spots_is_never_sure_of_either(recorded, seed):
+    localizer = Localizer(load_map(recorded[0]))
+    room = ("office_a", "office_b")[seed % 2]
+    robot = SimulatedRobot.kidnapped(make_world("building"), room, seed=seed, camera=CAMERA)
+    belief, _ = localizer.localize_once(robot.capture().image)
+    probability = belief.as_dict()
+    assert belief.state is not LocalizationState.LOCALIZED
+    twins = np.array([probability["office_a"], probability["office_b"]])
+    assert twins.max() / twins.min() < localizer.config.thresholds.localized_ratio
+
+
+def test_map_info_advises_two_spots_in_twins_without_counterparts(recorded):
+    from click.testing import CliRunner
+
+    from toploc.cli import main
+
+    result = CliRunner().invoke(main, ["map", "info", "--db", str(recorded[0])])
+    assert result.exit_code == 0, result.output
+    assert "look-alike rooms: office_a ~ office_b" in result.output
+    assert "same two spots" in result.output
+
+
+def test_map_info_says_where_twins_can_be_told_apart(building_map):
+    from click.testing import CliRunner
+
+    from toploc.cli import main
+
+    result = CliRunner().invoke(main, ["map", "info", "--db", str(building_map[0])])
+    assert result.exit_code == 0, result.output
+    assert "look-alike rooms: office_a ~ office_b" in result.output
+    assert "(counterparts)" in result.output and "same two spots" not in result.output

@@ -1,0 +1,184 @@
+"""Maps recorded the way a user records them (issue 19, section 1), with the simulated robot.
+
+A user follows the README's loop: drive the robot into a room, ``toploc map record``, turn and
+drive a little, record again, a few places per room; then the next room. :func:`record_map`
+does that in a rendered world, in process: per room the robot starts at a seeded random free
+pose (where the user drove it in), and between two records it turns by a random angle and
+drives 0.5–1.5 m (a drive that would bump or leave the room is drawn again, as a user steers
+clear). Each place is stored as the map node's ``map/add`` stores it (the same extraction, the
+pose the robot's odometry reports: its frame starts at the room's first record), the room graph
+gets the world's doors (``--connect-room``), and the likelihood is calibrated on the result as
+the service does after adds.
+
+Unlike a batch-rendered map (a place every metre on a grid), the look-alike rooms' places are
+then at different spots of their own frames: between twins, the inlier count says which room
+has a stored place nearer the robot, not which room it is in. That is the map the belief must
+stay honest on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from localizer.localizer import to_grey
+from localizer.robot_protocol import Pose2D
+from mapdb.database import MapDatabase
+from mapdb.records import NewPlace
+from robot.render import PanoramaCamera
+from robot.sim_robot import Obstacles, SimulatedRobot, random_free_pose
+from robot.world import World
+from toploc.extraction import extract_image, map_overrides
+from toploc.maps import calibrate_map
+
+STEP_M = (0.5, 1.5)
+"""How far the robot drives between two records of one room (uniform, metres)."""
+MAX_DRAWS = 200
+"""Turn-and-drive draws tried before a room is said to have no room for another step."""
+
+
+@dataclass(frozen=True)
+class RecordedPlace:
+    """One recorded place: its id in the map, its room and where it really was (building frame,
+    ground truth the map does not hold)."""
+
+    place_id: int
+    room: str
+    true_pose: Pose2D
+
+
+def _step(
+    obstacles: Obstacles, room: str, pose: Pose2D, rng: np.random.Generator
+) -> tuple[float, float]:
+    """A turn (rad) and a drive (m) from ``pose`` that stays inside ``room`` without bumping."""
+    world = obstacles.world
+    for _ in range(MAX_DRAWS):
+        turn_rad = float(rng.uniform(-math.pi, math.pi))
+        forward_m = float(rng.uniform(*STEP_M))
+        heading_rad = pose.heading_rad + turn_rad
+        _, bumped = obstacles.reach_m(pose, heading_rad, forward_m)
+        x_m = pose.x_m + forward_m * math.cos(heading_rad)
+        y_m = pose.y_m + forward_m * math.sin(heading_rad)
+        inside = world.room_at(x_m, y_m)
+        if not bumped and inside is not None and inside.name == room:
+            return turn_rad, forward_m
+    raise ValueError(f"room {room!r}: no drive of {STEP_M} m stays inside it without bumping")
+
+
+def record_room(
+    world: World,
+    room: str,
+    places: int,
+    seed: int,
+    db_path: Path,
+    detectors: Sequence[str],
+    camera: PanoramaCamera | None = None,
+) -> list[RecordedPlace]:
+    """Record ``places`` panoramas in ``room`` into the map at ``db_path`` (created if absent),
+    a random turn and drive between two (seeded by ``seed``), with ``camera`` (default: the
+    robot node's sim camera, 1024 x 192); returns what was recorded."""
+    rng = np.random.default_rng([seed, 19])
+    start = random_free_pose(Obstacles.of(world, 0.2), room, rng)
+    robot = SimulatedRobot(world, start, seed=seed, grey=True, camera=camera)
+    recorded: list[RecordedPlace] = []
+    for k in range(places):
+        if k:
+            turn_rad, forward_m = _step(robot.obstacles, room, robot.true_pose, rng)
+            robot.move(turn_rad, forward_m)
+        image = to_grey(robot.capture().image)
+        odometry = robot.odometry()
+        sha = hashlib.sha256(image.tobytes()).hexdigest()
+        place = NewPlace(
+            room=room,
+            image_sha256=sha,
+            source=f"recorded {world.name} {room} #{k} sha256:{sha[:12]}",
+            x_m=odometry.x_m,
+            y_m=odometry.y_m,
+            heading_deg=math.degrees(odometry.heading_rad),
+        )
+        with MapDatabase.open(db_path, create=True) as map_db:
+            fingerprints = extract_image(image, tuple(detectors), "auto", map_overrides(map_db))
+            place_id = map_db.add_place(place, fingerprints)
+        recorded.append(RecordedPlace(place_id, room, robot.true_pose))
+    return recorded
+
+
+def record_counterparts(
+    world: World,
+    pairs: Sequence[tuple[str, str]],
+    seed: int,
+    db_path: Path,
+    detectors: Sequence[str] = ("sift",),
+    camera: PanoramaCamera | None = None,
+    spots: int = 2,
+) -> list[RecordedPlace]:
+    """Follow ``toploc map info``'s advice for look-alike rooms without counterparts: record
+    ``spots`` more places in each room of each pair, at the same spots of their frames (seeded
+    random free spots of the first room, the same room-frame positions in the second: the
+    twins' frames are identical), with no pose (the user carried the robot there); then
+    calibrate again."""
+    rng = np.random.default_rng([seed, 23])
+    obstacles = Obstacles.of(world, 0.2)
+    recorded: list[RecordedPlace] = []
+    for first, second in [pair for pair in pairs for _ in range(spots)]:
+        spot = random_free_pose(obstacles, first, rng)
+        (x0, y0), (x1, y1) = world.room(first).origin_m, world.room(second).origin_m
+        for room, (dx, dy) in ((first, (0.0, 0.0)), (second, (x1 - x0, y1 - y0))):
+            heading_rad = float(rng.uniform(-math.pi, math.pi))
+            pose = Pose2D(spot.x_m + dx, spot.y_m + dy, heading_rad)
+            robot = SimulatedRobot(world, pose, seed=seed, grey=True, camera=camera)
+            image = to_grey(robot.capture().image)
+            sha = hashlib.sha256(image.tobytes()).hexdigest()
+            place = NewPlace(
+                room, sha, f"recorded {world.name} {room} counterpart sha256:{sha[:12]}"
+            )
+            with MapDatabase.open(db_path, create=False) as map_db:
+                fingerprints = extract_image(image, tuple(detectors), "auto", map_overrides(map_db))
+                place_id = map_db.add_place(place, fingerprints)
+            recorded.append(RecordedPlace(place_id, room, pose))
+    for detector in detectors:
+        calibrate_map(db_path, detector)
+    return recorded
+
+
+def record_map(
+    world: World,
+    places_per_room: int,
+    seed: int,
+    db_path: Path,
+    rooms: Sequence[str] | None = None,
+    detectors: Sequence[str] = ("sift",),
+    progress: bool = False,
+    camera: PanoramaCamera | None = None,
+) -> list[RecordedPlace]:
+    """Record ``places_per_room`` places in each of ``rooms`` (default: every room of ``world``)
+    into a new map at ``db_path``, connect the rooms the world's doors join, and calibrate the
+    likelihood of each detector. ``FileExistsError`` if ``db_path`` exists: a recording starts
+    from an empty map."""
+    if places_per_room < 1:
+        raise ValueError(f"places_per_room must be >= 1, got {places_per_room}")
+    if db_path.exists():
+        raise FileExistsError(f"{db_path} exists: a recorded map starts from an empty file")
+    chosen = tuple(rooms) if rooms is not None else tuple(r.name for r in world.rooms)
+    unknown = set(chosen) - {r.name for r in world.rooms}
+    if unknown:
+        raise ValueError(f"world {world.name!r} has no room {sorted(unknown)}")
+    recorded: list[RecordedPlace] = []
+    bar = tqdm(chosen, desc=f"record {world.name} x{places_per_room}", disable=not progress)
+    for i, room in enumerate(bar):
+        recorded += record_room(
+            world, room, places_per_room, seed * 1000 + i, db_path, detectors, camera
+        )
+    with MapDatabase.open(db_path, create=False) as map_db:
+        for door in world.doors:
+            if door.room_a in chosen and door.room_b in chosen:
+                map_db.connect_rooms(door.room_a, door.room_b)
+    for detector in detectors:
+        calibrate_map(db_path, detector)
+    return recorded
