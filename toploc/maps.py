@@ -217,8 +217,9 @@ def changed_cache_map(db_path: Path, dataset: Path) -> str | None:
 
 
 def _calibrate_once(db_path: Path, detector: str, progress: bool) -> None:
-    """Calibrate the map's likelihood unless it has been (maps cached by older versions)."""
+    """Calibrate the map's likelihood unless it has been by a version that looks for look-alike
+    rooms (a cached map calibrated before that, or never, is calibrated again)."""
     with MapDatabase.open(db_path, create=False) as map_db:
-        done = map_db.likelihood(detector) is not None
-    if not done:
+        stored = map_db.likelihood(detector)
+    if stored is None or "lookalikes" not in stored:
         calibrate_map(db_path, detector, progress)
