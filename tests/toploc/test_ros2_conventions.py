@@ -193,3 +193,16 @@ def test_cdr_round_trip_and_a_malformed_payload_is_named(types):
     assert types.deserialize(data, f"{TRIGGER}_Response").message == "kitchen"
     with pytest.raises(ValueError, match=r"not a CDR std_srvs/srv/Trigger_Request \(2 bytes\)"):
         types.deserialize(b"\x00\x01", f"{TRIGGER}_Request")
+
+
+def test_the_docs_hash_table_is_what_the_code_hashes(types):
+    """docs/ros2.md's table of types and hashes cannot drift from the code."""
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| `([a-z_]+/(?:msg|srv)/\w+)` \| `([\w:]+)` \| `(RIHS01_\w+)` \|$", page,
+                      re.MULTILINE)  # fmt: skip
+    assert len(rows) == 6
+    for type_name, dds_name, digest in rows:
+        assert (dds_type_name(type_name), types.type_hash(type_name)) == (dds_name, digest)
