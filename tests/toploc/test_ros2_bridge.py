@@ -183,12 +183,17 @@ def test_a_subscriber_that_insists_on_the_attachment_decodes_every_belief(graph)
             graph.data_key("MP", topics[which][0]), zenoh.handlers.Callback(on_sample)
         )
 
+    assert wait_for(lambda: graph.bridge.last_published == graph.service.current, 5)
     subscribers = [subscriber(which) for which in topics]
     time.sleep(0.3)  # the subscriptions reach the bridge's peer through the router
     graph.bridge.localizer.localize(active=False)
-    assert wait_for(lambda: all(received[w] for w in topics), 5), {
-        k: len(v) for k, v in received.items()
-    }
+
+    def localized_everywhere() -> bool:
+        with lock:
+            last = [received[w][-1][1] if received[w] else None for w in topics]
+        return all(m is not None for m in last) and last[2].state == "localized"
+
+    assert wait_for(localized_everywhere, 5), {k: len(v) for k, v in received.items()}
     (_, text), (_, diag), (attachment, typed), (_, pose) = (received[w][-1] for w in topics)
     assert json.loads(text.data)["state"] == "localized"
     status = diag.status[0]
@@ -208,7 +213,7 @@ def test_a_subscriber_that_insists_on_the_attachment_decodes_every_belief(graph)
 
 def test_a_late_joiner_gets_the_latest_belief(graph):
     graph.bridge.localizer.localize(active=False)
-    assert wait_for(lambda: graph.bridge.publish(graph.service.current) is False, 5)
+    assert wait_for(lambda: graph.bridge.last_published == graph.service.current, 5)
     store = ros_typestore()
     got: list = []
     late = zenoh.ext.declare_advanced_subscriber(
@@ -276,9 +281,10 @@ def test_a_request_without_the_attachment_is_refused_and_not_served(graph):
 
 def test_the_bridge_follows_the_localizer_going_and_coming_back(graph):
     graph.bridge.localizer.localize(active=False)
+    assert wait_for(lambda: (graph.bridge.last_published or {}).get("state") == "localized", 5)
     graph.localizer.close()
     assert wait_for(lambda: not graph.bridge.localizer_up, 5)
-    assert wait_for(lambda: (graph.bridge._published or {}).get("stale") is True, 5)
+    assert wait_for(lambda: (graph.bridge.last_published or {}).get("stale") is True, 5)
     reply = graph.call("/toploc/localize", trigger_request(), sequence=2)
     response = ros_typestore().deserialize_cdr(
         reply.ok.payload.to_bytes(), "std_srvs/msg/TriggerOut"
@@ -286,7 +292,7 @@ def test_the_bridge_follows_the_localizer_going_and_coming_back(graph):
     assert response.success is False and "not on the bus" in response.message
     with LocalizerNode(graph.zbus.server, ROBOT_ID, graph.service):
         assert wait_for(lambda: graph.bridge.localizer_up, 5)
-        assert wait_for(lambda: "stale" not in (graph.bridge._published or {"stale": 1}), 5)
+        assert wait_for(lambda: "stale" not in (graph.bridge.last_published or {"stale": 1}), 5)
 
 
 def test_a_router_that_goes_away_and_comes_back_is_rejoined(graph):

@@ -141,6 +141,12 @@ class Ros2Bridge:
         with self._lock:
             return self._localizer_up
 
+    @property
+    def last_published(self) -> dict[str, Any] | None:
+        """The belief the topics carry now (``None`` before the first)."""
+        with self._lock:
+            return self._published
+
     def _on_localizer_token(self, sample: zenoh.Sample) -> None:
         up = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
@@ -183,12 +189,15 @@ class Ros2Bridge:
 
     def publish(self, belief: Mapping[str, Any]) -> bool:
         """Publish ``belief`` on every topic unless it equals the last one published; whether
-        it was. Called with each belief the localizer publishes or answers."""
+        it was. Called with each belief the localizer publishes or answers; marked stale while
+        the localizer's token is gone."""
         current = dict(belief)
         with self._publish_lock:
             with self._lock:
                 if not current.get("stale"):
                     self._belief = current
+                    if not self._localizer_up:  # a publication that came after its token went
+                        current = mark_stale(current)
                 if current == self._published:
                     return False
                 self._published = current

@@ -4,15 +4,14 @@
 A topic or service of fully qualified name ``/ns/name`` and type ``pkg/msg/Type`` is the key
 ``<domain_id>/ns/name/pkg::msg::dds_::Type_/<RIHS01 type hash>``: the domain keeps graphs of
 different ``ROS_DOMAIN_ID`` apart, the type name and hash keep endpoints of different types
-apart. Humble has no type hashes: there the last chunk is :data:`HUMBLE_TYPE_HASH`.
+apart. (Humble has no type hashes: there the last chunk is ``TypeHashNotSupported``; toploc
+speaks Jazzy's and later.)
 """
 
 from __future__ import annotations
 
 import re
 
-HUMBLE_TYPE_HASH = "TypeHashNotSupported"
-"""The type hash chunk of a ROS 2 Humble endpoint (Humble's rosidl makes no type hashes)."""
 SLASH_REPLACEMENT = "%"
 """What stands for ``/`` in a mangled name (a liveliness token's namespace, topic, enclave)."""
 MAX_DOMAIN_ID = 232
