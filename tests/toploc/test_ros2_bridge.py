@@ -307,3 +307,19 @@ def test_a_router_that_goes_away_and_comes_back_is_rejoined(graph):
     graph.bridge.localizer.localize(active=False)
     assert wait_for(lambda: bool(got), 5)
     sub.undeclare()
+
+
+def test_a_bridge_started_before_the_router_joins_it_when_it_comes(zbus):
+    endpoint = free_endpoint()
+    with (
+        LocalizerNode(zbus.server, ROBOT_ID, FakeService()),
+        bus.open_session(ros2_bus_config(ROBOT_ID, connect=(endpoint,))) as ros_session,
+        Ros2Bridge(zbus.client, ROBOT_ID, ros_session, Ros2Settings(DOMAIN)),
+        router_session(endpoint) as router,
+    ):
+
+        def node_seen() -> bool:
+            replies = router.liveliness().get(f"@ros2_lv/{DOMAIN}/**", timeout=1.0)
+            return any(r.ok is not None and "/NN/" in str(r.ok.key_expr) for r in replies)
+
+        assert wait_for(node_seen, 10)

@@ -18,6 +18,7 @@ from toploc.bus.config import (
     ros2_bus_config,
 )
 from toploc.bus.ros2.keys import MAX_DOMAIN_ID
+from toploc.commands.options import warn_if_exposed
 from toploc.nodes.ros2 import NODE_NAME, Ros2Settings
 
 _OPTIONS = (
@@ -88,6 +89,7 @@ def ros2_setup(
         config = ros2_bus_config(robot_id, zenoh_file, connect or None, listen or None)
     except ValueError as error:
         raise click.ClickException(f"ROS session: {error}") from None
+    warn_if_exposed(config)  # a ROS client may call localize_active, which drives the robot
     return config, settings
 
 
