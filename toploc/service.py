@@ -6,7 +6,8 @@ when a robot object is given (the simulated robot here), its robot node. The loc
 drives the robot through the bus (:class:`toploc.nodes.robot.RemoteRobot`), so a real base
 running its own robot node elsewhere is used the same way.
 
-Each node role has its ``enter_*`` function (robot, camera, localizer with homing, map), which
+Each node role has its ``enter_*`` function (robot, camera, localizer with homing, map, the ROS 2
+bridge), which
 enters the node into an :class:`~contextlib.ExitStack`: ``toploc serve`` enters several on one
 session, ``toploc node ROLE`` one per process (:mod:`toploc.commands.node`).
 
@@ -49,6 +50,7 @@ from toploc.nodes.homing import HomingNode, HomingService
 from toploc.nodes.localizer import LocalizerNode
 from toploc.nodes.mapdb import MapNode, subscribe_changes
 from toploc.nodes.robot import RemoteRobot, RobotNode
+from toploc.nodes.ros2 import Ros2Bridge, Ros2Settings
 from toploc.runner import LocalizationRunner
 
 REFRESH_SETTLE_S = 2.0
@@ -289,6 +291,19 @@ def enter_map_node(
             read_only=read_only,
         )
     )  # fmt: skip
+
+
+def enter_ros2_bridge(
+    stack: ExitStack,
+    toploc_session: zenoh.Session,
+    robot_id: str,
+    ros_config: BusConfig,
+    settings: Ros2Settings,
+) -> Ros2Bridge:
+    """The ROS 2 bridge of ``robot_id``'s localizer (``toploc node ros2``, ``toploc serve
+    --ros2``) on a session of its own, ``ros_config``: a peer of the ROS router."""
+    ros_session = stack.enter_context(open_session(ros_config))
+    return stack.enter_context(Ros2Bridge(toploc_session, robot_id, ros_session, settings))
 
 
 @contextmanager

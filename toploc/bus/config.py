@@ -31,6 +31,13 @@ from toploc.bus.errors import ZenohConfigError
 from toploc.bus.keys import check_robot_id, default_robot_id
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+ROS2_ROUTER_ENDPOINT = "tcp/localhost:7447"
+"""Where a ROS 2 robot's Zenoh router (``ros2 run rmw_zenoh_cpp rmw_zenohd``) listens, and what
+an rmw_zenoh session connects to by default (rmw_zenoh's ``DEFAULT_RMW_ZENOH_SESSION_CONFIG``)."""
+ROS2_LISTEN_ENDPOINT = "tcp/127.0.0.1:0"
+"""Where toploc's ROS 2 session listens by default: loopback, on a port the OS picks, as an
+rmw_zenoh session does (``tcp/localhost:0``), so that the robot's ROS nodes reach it peer to
+peer through the router's gossip and nothing beyond this machine does."""
 MODES = ("peer", "client", "router")
 _LOOPBACK_NAMES = {"localhost", "localhost.localdomain", "ip6-localhost"}
 
@@ -180,6 +187,27 @@ def client_bus_config(
         mode=found.mode or "peer",
         listen=(),
         connect=tuple(connect if connect is not None else found.connect or (DEFAULT_ENDPOINT,)),
+        scouting_multicast=bool(found.scouting_multicast),
+        zenoh_file=zenoh_file,
+    )
+
+
+def ros2_bus_config(
+    robot_id: str,
+    zenoh_file: Path | None = None,
+    connect: Sequence[str] | None = None,
+    listen: Sequence[str] | None = None,
+) -> BusConfig:
+    """The session that joins a ROS 2 graph over rmw_zenoh: a peer of the robot's Zenoh router,
+    connecting to ``connect``, else the file's, else :data:`ROS2_ROUTER_ENDPOINT`; listening on
+    ``listen``, else the file's, else :data:`ROS2_LISTEN_ENDPOINT`; multicast scouting off (as
+    rmw_zenoh's; the router's gossip finds the peers)."""
+    found = FileSettings() if zenoh_file is None else file_settings(load_zenoh_file(zenoh_file))
+    return BusConfig(
+        robot_id=robot_id,
+        mode=found.mode or "peer",
+        listen=tuple(_first_given(listen, found.listen, (ROS2_LISTEN_ENDPOINT,))),
+        connect=tuple(connect if connect is not None else found.connect or (ROS2_ROUTER_ENDPOINT,)),
         scouting_multicast=bool(found.scouting_multicast),
         zenoh_file=zenoh_file,
     )

@@ -1,4 +1,4 @@
-"""``toploc node robot|camera|localizer|map``: one node per process, so that the robot's driver
+"""``toploc node robot|camera|localizer|map|ros2``: one node per process, so that the robot's driver
 runs on the robot and the localizer elsewhere if wanted (``toploc serve`` runs them all in one).
 
 Each command opens its own Zenoh session, enters its node with the ``enter_*`` function of
@@ -24,6 +24,8 @@ from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError
 from robot.p2os_base import P2osError
 from toploc.bus import BusConfig, BusError, open_session
+from toploc.bus.config import client_bus_config
+from toploc.commands.bus_client import client_options
 from toploc.commands.options import (
     StopSignal,
     camera_option,
@@ -42,6 +44,7 @@ from toploc.commands.options import (
     stop_on_signals,
     stopped,
 )
+from toploc.commands.ros2_options import describe_ros2, ros2_options, ros2_setup
 from toploc.limits import Limits
 from toploc.maps import ensure_world_map
 from toploc.nodes.sim_truth import subscribe_true_pose
@@ -52,6 +55,7 @@ from toploc.service import (
     enter_localizer_nodes,
     enter_map_node,
     enter_robot_node,
+    enter_ros2_bridge,
 )
 
 Enter = Callable[[ExitStack, zenoh.Session, Limits], str]
@@ -250,4 +254,39 @@ def map_node(
 
     with map_file(db_path, new_map), ExitStack() as stack:
         stop = _run(config, limits, "map node: ", enter, stack)
+    stopped(stop)
+
+
+@node_group.command("ros2")
+@long_running
+@client_options
+@ros2_options
+def ros2_node(
+    robot_id: str,
+    endpoints: tuple[str, ...],
+    zenoh_file: Path | None,
+    ros_domain_id: int,
+    ros_namespace: str,
+    ros_connect: tuple[str, ...],
+    ros_listen: tuple[str, ...],
+    ros_zenoh_file: Path | None,
+) -> None:
+    """The ROS 2 bridge: the service's belief and localize/reset on a ROS 2 graph over
+    rmw_zenoh (node toploc; docs/ros2.md), until interrupted. It connects to the service as a
+    client (--connect) and to the robot's ROS router (--ros-connect) as a peer."""
+    try:
+        config = client_bus_config(robot_id, zenoh_file, endpoints or None)
+    except ValueError as error:
+        raise click.ClickException(str(error)) from None
+    ros_config, settings = ros2_setup(
+        robot_id, ros_domain_id, ros_namespace, ros_connect, ros_listen, ros_zenoh_file
+    )
+    click.echo(f"robot id: {robot_id} (keys toploc/{robot_id}/**; --robot-id to change)")
+
+    def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
+        enter_ros2_bridge(stack, session, robot_id, ros_config, settings)
+        return describe_ros2(ros_config, settings)
+
+    with ExitStack() as stack:
+        stop = _run(config, Limits(), "ros2 bridge: ", enter, stack)
     stopped(stop)

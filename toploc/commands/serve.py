@@ -39,11 +39,18 @@ from toploc.commands.options import (
     stop_on_signals,
     stopped,
 )
+from toploc.commands.ros2_options import (
+    check_ports_apart,
+    describe_ros2,
+    ros2_options,
+    ros2_setup,
+)
 from toploc.limits import Limits
 from toploc.maps import ensure_world_map
+from toploc.nodes.ros2 import Ros2Settings
 from toploc.nodes.sim_truth import subscribe_true_pose
 from toploc.robots import ROBOT_SPECS, open_served_robot
-from toploc.service import MapRefresher, start_service
+from toploc.service import MapRefresher, enter_ros2_bridge, start_service
 
 
 @click.command("serve")
@@ -79,6 +86,13 @@ from toploc.service import MapRefresher, start_service
 )
 @camera_option
 @click.option(
+    "--ros2",
+    is_flag=True,
+    help="Also join the robot's ROS 2 graph over rmw_zenoh as node toploc (the belief as "
+    "topics, localize/reset as services; docs/ros2.md); the --ros-* options say where.",
+)
+@ros2_options
+@click.option(
     "--source",
     default="sim",
     show_default=True,
@@ -105,6 +119,12 @@ def serve(
     no_sim: bool,
     robot_spec: str,
     camera: str,
+    ros2: bool,
+    ros_domain_id: int,
+    ros_namespace: str,
+    ros_connect: tuple[str, ...],
+    ros_listen: tuple[str, ...],
+    ros_zenoh_file: Path | None,
     source: str,
     limits_path: Path | None,
 ) -> None:
@@ -132,10 +152,15 @@ def serve(
             f"--source {source}: the camera is served by this service's robot node, which "
             "--no-sim leaves out (toploc node camera serves a camera without a base)"
         )
+    ros = None
+    if ros2:
+        ros = ros2_setup(config.robot_id, ros_domain_id, ros_namespace, ros_connect, ros_listen,
+                         ros_zenoh_file)  # fmt: skip
+        check_ports_apart(config, ros[0])
     with map_file(db_path, new_map) as db_path, ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
         stop, refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
-                                 robot_spec, camera, limits, source, capture_from)  # fmt: skip
+                                 robot_spec, camera, limits, source, capture_from, ros)  # fmt: skip
     stopped(stop, refresher)
 
 
@@ -152,6 +177,7 @@ def _serve(
     limits: Limits,
     source: str,
     capture_from: Camera | None,
+    ros: tuple[BusConfig, Ros2Settings] | None = None,
 ) -> tuple[StopSignal, MapRefresher]:
     """Run the service until SIGINT or SIGTERM; the signal and the service's map refresher."""
     db = db_path or ensure_world_map(sim_world)
@@ -172,6 +198,9 @@ def _serve(
             if true_pose is not None:
                 stack.callback(subscribe_true_pose(service.session, true_pose).undeclare)
                 where += f", its camera at the true pose on toploc/{config.robot_id}/sim/true_pose"
+            if ros is not None:
+                enter_ros2_bridge(stack, service.session, config.robot_id, *ros)
+                where += f"; {describe_ros2(*ros)}"
             click.echo(
                 f"serving {db} as {describe_bus(config)}; robot: {where}; camera: {source}. "
                 "Ctrl-C stops."
