@@ -14,9 +14,11 @@ twin at the same spot of their frames (:data:`COUNTERPART_SHARE`; a map rendered
 out in each room's frame has them everywhere). The robot is then equally far from both, and
 what one gets more of is what only its room shows (the corridor seen through its door). So
 :func:`twin_counts` replaces each look-alike room's count by its count on the best counterpart
-pair the frame verified; where the frame has none, the group is **aliased** and its rooms are
-weighed as equally likely (:func:`localizer.likelihood.lookalike_log_ratios`): the counts say
-nothing about which twin it is, and the active loop must drive to a counterpart place.
+pair the frame verified (one frame moves their odds by at most
+:data:`~localizer.likelihood.MAX_TWIN_LOG_RATIO`); where the frame has none, the group is
+**aliased** and its rooms are weighed as equally likely
+(:func:`localizer.likelihood.lookalike_log_ratios`): the counts say nothing about which twin it
+is, and the active loop must drive to a counterpart place.
 
 Pure core: numpy, no I/O.
 """
@@ -118,7 +120,9 @@ def twin_counts(
     place's view is matched best, so its count there beats its counterpart's by however far the
     counterpart stands from the exact spot (0.2 m cost a third of the inliers in ``building``),
     whichever room the robot is in: no pair with that place is read, only the frame's other
-    counterpart pairs (on a grid, the neighbours' pairs, equally far from the robot).
+    counterpart pairs (on a grid, the neighbours' pairs, equally far from the robot). The
+    localizer passes it only when a counterpart of that place stands off its spot
+    (:data:`EXACT_COUNTERPART_SHARE`).
     """
     out = np.array(counts, dtype=float)
     by_id = {int(item.place_id): item for item in evidence}
