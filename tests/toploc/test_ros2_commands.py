@@ -101,3 +101,26 @@ def test_serve_ros2_refuses_a_bus_on_the_ros_routers_port() -> None:
     )  # fmt: skip
     assert result.returncode == 2, result
     assert "--listen tcp/127.0.0.1:7447 is the port of the ROS router" in result.stderr
+
+
+def test_serve_ros2_alone_puts_toplocs_bus_through_the_ros_router(tmp_path: Path) -> None:
+    ros_endpoint = free_endpoint()
+    args = ("--db", str(tmp_path / "new.db"), "--new-map", "--robot-id", "s5", "--ros2",
+            "--ros-connect", ros_endpoint)  # fmt: skip
+    with router(ros_endpoint) as ros:
+        serve = Node(*args, command=("serve",))
+        try:
+            serve.wait_ready(60.0)
+            assert any(f"toploc bus: through the ROS router at {ros_endpoint}" in line
+                       for line in serve.output), serve.output  # fmt: skip
+            assert wait_for(lambda: bool(node_tokens(ros, 0)), 10), serve.output
+            client = subprocess.run(
+                [sys.executable, "-m", "toploc", "belief", "--robot-id", "s5", "--connect",
+                 ros_endpoint, "--json"],
+                cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True,
+                text=True, timeout=60,
+            )  # fmt: skip
+            # the service answered through the router: its map is new, so no places yet
+            assert "toploc/s5/localizer/belief: NoPlacesYetError" in client.stderr, client
+        finally:
+            assert serve.stop() == 0, "\n".join(serve.output)

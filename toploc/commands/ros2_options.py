@@ -106,7 +106,8 @@ def check_ports_apart(toploc: BusConfig, ros: BusConfig) -> None:
             if is_loopback(listen) and is_loopback(router) and _port(listen) == _port(router):
                 raise click.UsageError(
                     f"--listen {listen} is the port of the ROS router (--ros-connect {router}): "
-                    "give toploc's own bus another port, e.g. --listen tcp/127.0.0.1:7448 "
+                    "leave --listen out (toploc's bus then goes through the router) or give it "
+                    "another port, e.g. --listen tcp/127.0.0.1:7448 "
                     "(and --connect it in toploc's clients)"
                 )
 

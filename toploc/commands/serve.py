@@ -10,6 +10,7 @@ refuse to write (record your own with ``--db FILE --new-map``).
 from __future__ import annotations
 
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -20,6 +21,7 @@ from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.p2os_base import P2osError
 from toploc.bus import BusConfig, BusError
+from toploc.bus.config import ROS2_LISTEN_ENDPOINT
 from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
     StopSignal,
@@ -156,6 +158,13 @@ def serve(
     if ros2:
         ros = ros2_setup(config.robot_id, ros_domain_id, ros_namespace, ros_connect, ros_listen,
                          ros_zenoh_file)  # fmt: skip
+        if not (listen or connect or zenoh_file):
+            # one Zenoh network: toploc's keys travel through the robot's router, where the
+            # clients (tcp/127.0.0.1:7447 by default) find them. A peer of the router that
+            # listens on an ephemeral loopback port, as an rmw_zenoh node does: the router
+            # tells other peers that address (it does not carry peer-to-peer traffic itself)
+            config = replace(config, listen=(ROS2_LISTEN_ENDPOINT,), connect=ros[0].connect)
+            click.echo(f"toploc bus: through the ROS router at {', '.join(ros[0].connect)}")
         check_ports_apart(config, ros[0])
     with map_file(db_path, new_map) as db_path, ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
