@@ -300,12 +300,9 @@ class CalibrationSamples:
             has_own = room_sizes.get(own_room, 0) >= 2
             others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
             bar = max(lookalike_min_inliers, lookalike_fraction * own)
-            pairs |= {
-                (min(own_room, room), max(own_room, room))
-                for room in room_sizes
-                if room != own_room and float(best.get(room, 0.0)) >= bar
-            }
-            lookalikes = [count for count in others if count >= bar]
+            twins = [r for r in room_sizes if r != own_room and float(best.get(r, 0.0)) >= bar]
+            pairs |= {(min(own_room, room), max(own_room, room)) for room in twins}
+            lookalikes = [float(best.get(room, 0.0)) for room in twins]
             if lookalikes:
                 n_lookalike += len(lookalikes)
                 others = [count for count in others if count < bar]

@@ -24,7 +24,12 @@ from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
 from localizer.features import extract_with_camera, matching_overrides
 from localizer.likelihood import Likelihood, RatioLikelihood, room_inliers, room_likelihood
-from localizer.lookalikes import EXACT_COUNTERPART_SHARE, lookalike_groups, twin_counts
+from localizer.lookalikes import (
+    EXACT_COUNTERPART_SHARE,
+    lookalike_groups,
+    partners_of,
+    twin_counts,
+)
 from localizer.policy import PlaceSimilarity
 from localizer.retrieval import PlaceIndex
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
@@ -180,14 +185,8 @@ class Localizer:
         self.evidence_params = _resolved(self.config.evidence, calibrated)
         pairs = calibrated.lookalikes if calibrated is not None else ()
         self.lookalike_groups = lookalike_groups(pairs, loaded.rooms)
-        self.lookalikes: dict[str, frozenset[str]] = {}
-        for a, b in pairs:
-            self.lookalikes[a] = self.lookalikes.get(a, frozenset()) | {b}
-            self.lookalikes[b] = self.lookalikes.get(b, frozenset()) | {a}
-        self.counterparts: dict[int, frozenset[int]] = {}
-        for p, q in calibrated.counterparts if calibrated is not None else ():
-            self.counterparts[p] = self.counterparts.get(p, frozenset()) | {q}
-            self.counterparts[q] = self.counterparts.get(q, frozenset()) | {p}
+        self.lookalikes = partners_of(pairs)
+        self.counterparts = partners_of(calibrated.counterparts if calibrated is not None else ())
         # a query is extracted as the map's places were: their equalisation and keypoint cap
         self._overrides = matching_overrides(loaded.table.params[0]) if loaded.table.params else {}
 
@@ -253,7 +252,7 @@ class Localizer:
             self.map.rooms,
             room_inliers(evidence, self.map.rooms, count=model.count),
             self.lookalike_groups,
-            model.counterparts,
+            self.counterparts,
             count=model.count,
             at_place=self._inexact_counterpart(observation.at_place),
         )

@@ -25,11 +25,14 @@ Pure core: numpy, no I/O.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Hashable, Iterable, Mapping, Sequence
+from typing import TypeVar
 
 import numpy as np
 
 from localizer.likelihood import PlaceScore, place_count
+
+K = TypeVar("K", bound=Hashable)
 
 COUNTERPART_SHARE = 0.3
 """Two places of look-alike rooms are counterparts when one verifies the other on at least this
@@ -75,6 +78,15 @@ def lookalike_groups(
     return tuple(tuple(members) for members in groups.values())
 
 
+def partners_of(pairs: Iterable[tuple[K, K]]) -> dict[K, frozenset[K]]:
+    """Each member of ``pairs`` (rooms or place ids) with the members it is paired with."""
+    partners: dict[K, frozenset[K]] = {}
+    for a, b in pairs:
+        partners[a] = partners.get(a, frozenset()) | {b}
+        partners[b] = partners.get(b, frozenset()) | {a}
+    return partners
+
+
 def is_counterpart(inliers: int, keypoints: int) -> bool:
     """Whether a place whose view has ``keypoints`` keypoints and verifies another place of a
     look-alike room on ``inliers`` of them has that place as its counterpart."""
@@ -101,7 +113,7 @@ def twin_counts(
     rooms: Sequence[str],
     counts: np.ndarray,
     groups: Sequence[Sequence[int]],
-    counterparts: Iterable[tuple[int, int]],
+    counterparts: Mapping[int, frozenset[int]],
     *,
     count: str,
     at_place: int | None = None,
@@ -110,8 +122,8 @@ def twin_counts(
     group read on counterparts, and the groups that stay aliased.
 
     For a group, the frame's places of its rooms that have a counterpart (``counterparts``:
-    pairs of place ids) in every other room of the group, both verified in ``evidence``, are
-    candidates; the one with the highest count (``count``, see
+    each place id's counterparts, :func:`partners_of`) in every other room of the group, both
+    verified in ``evidence``, are candidates; the one with the highest count (``count``, see
     :func:`~localizer.likelihood.place_count`) gives its room its count and every other room of
     the group its counterpart's. A group without a candidate keeps its counts and is returned
     as aliased.
@@ -126,10 +138,6 @@ def twin_counts(
     """
     out = np.array(counts, dtype=float)
     by_id = {int(item.place_id): item for item in evidence}
-    partners: dict[int, set[int]] = {}
-    for a, b in counterparts:
-        partners.setdefault(int(a), set()).add(int(b))
-        partners.setdefault(int(b), set()).add(int(a))
     room_index = {room: i for i, room in enumerate(rooms)}
     aliased: list[tuple[int, ...]] = []
     for group in groups:
@@ -146,7 +154,7 @@ def twin_counts(
                     continue
                 found = [
                     place_count(by_id[p], count)
-                    for p in partners.get(int(item.place_id), ())
+                    for p in counterparts.get(int(item.place_id), ())
                     if p in by_id and by_id[p].room == rooms[other] and p != at_place
                 ]
                 if not found:

@@ -20,6 +20,7 @@ from localizer.lookalikes import (
     is_counterpart,
     lookalike_groups,
     pairs_without_counterparts,
+    partners_of,
     twin_counts,
 )
 
@@ -91,7 +92,9 @@ def test_twins_are_read_on_the_counterpart_pair_the_frame_verified():
     # office_b's 13 stand at one spot of their frames and the frame verified both
     evidence = [Score(12, "office_b", 183), Score(3, "office_a", 120), Score(13, "office_b", 90)]
     counts = room_inliers(evidence, ROOMS, count="inliers")
-    read, aliased = twin_counts(evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers")
+    read, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers"
+    )
     assert aliased == ()
     assert read[1] == 120 and read[2] == 90
 
@@ -100,7 +103,9 @@ def test_twins_without_a_verified_counterpart_pair_stay_aliased():
     evidence = [Score(12, "office_b", 183), Score(3, "office_a", 120)]
     counts = room_inliers(evidence, ROOMS, count="inliers")
     # 3's counterpart 13 was not among the places the frame verified
-    read, aliased = twin_counts(evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers")
+    read, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers"
+    )
     assert aliased == OFFICES
     assert list(read) == list(counts)
 
@@ -114,7 +119,7 @@ def test_of_several_counterpart_pairs_the_best_matched_is_read():
     ]
     counts = room_inliers(evidence, ROOMS, count="inliers")
     pairs = [(3, 13), (4, 14)]
-    read, _ = twin_counts(evidence, ROOMS, counts, OFFICES, pairs, count="inliers")
+    read, _ = twin_counts(evidence, ROOMS, counts, OFFICES, partners_of(pairs), count="inliers")
     assert read[1] == 150 and read[2] == 110
 
 
@@ -141,7 +146,7 @@ def test_a_frame_at_the_place_driven_to_is_not_read_on_that_place():
     evidence = [Score(3, "office_a", 150), Score(13, "office_b", 90)]
     counts = room_inliers(evidence, ROOMS, count="inliers")
     _, aliased = twin_counts(
-        evidence, ROOMS, counts, OFFICES, [(3, 13)], count="inliers", at_place=3
+        evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers", at_place=3
     )
     assert aliased == OFFICES
 
@@ -156,7 +161,7 @@ def test_a_frame_at_the_place_driven_to_is_read_on_the_other_pairs():
     counts = room_inliers(evidence, ROOMS, count="inliers")
     pairs = [(3, 13), (4, 14)]
     read, aliased = twin_counts(
-        evidence, ROOMS, counts, OFFICES, pairs, count="inliers", at_place=3
+        evidence, ROOMS, counts, OFFICES, partners_of(pairs), count="inliers", at_place=3
     )
     assert aliased == () and (read[1], read[2]) == (60, 70)
 
