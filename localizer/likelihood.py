@@ -44,6 +44,7 @@ Pure core: numpy and scipy, no I/O.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -276,8 +277,8 @@ class CalibrationSamples:
     max_other: np.ndarray
     n_lookalike: int = 0
     lookalike_pairs: tuple[tuple[str, str], ...] = ()
-    """The look-alike rooms found, each pair once (sorted names): the query's room and a room
-    that explained it as a look-alike."""
+    """The look-alike rooms found, each pair once (sorted names): rooms each of which explained
+    at least half of the other's queries as a look-alike."""
 
     @classmethod
     def from_queries(
@@ -294,14 +295,16 @@ class CalibrationSamples:
         other: list[float] = []
         max_other: list[float] = []
         n_lookalike = 0
-        pairs: set[tuple[str, str]] = set()
+        flagged: Counter[tuple[str, str]] = Counter()
+        asked: Counter[str] = Counter()
         for own_room, best in queries:
             own = float(best.get(own_room, 0.0))
             has_own = room_sizes.get(own_room, 0) >= 2
             others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
             bar = max(lookalike_min_inliers, lookalike_fraction * own)
             twins = [r for r in room_sizes if r != own_room and float(best.get(r, 0.0)) >= bar]
-            pairs |= {(min(own_room, room), max(own_room, room)) for room in twins}
+            asked[own_room] += 1
+            flagged.update((own_room, room) for room in twins)
             lookalikes = [float(best.get(room, 0.0)) for room in twins]
             if lookalikes:
                 n_lookalike += len(lookalikes)
@@ -315,6 +318,13 @@ class CalibrationSamples:
             unseen = [count for count in others if count < seen_bar]
             if unseen:
                 max_other.append(max(unseen))
+        # twins explain most of each other's views; a room seen through a door explains only
+        # the views near it (on the dense house, hall and living room against the bedrooms)
+        pairs = {
+            (min(a, b), max(a, b))
+            for a, b in flagged
+            if flagged[(a, b)] >= 0.5 * asked[a] and flagged[(b, a)] >= 0.5 * asked[b]
+        }
         return cls(
             np.array(same), np.array(other), np.array(max_other), n_lookalike, tuple(sorted(pairs))
         )

@@ -171,3 +171,20 @@ def test_one_frame_read_on_counterparts_moves_twins_by_at_most_the_cap():
     counts = np.array([5.0, 300.0, 120.0, 0.0, 0.0, 0.0])
     likelihood = model.from_counts(counts, compared=OFFICES)
     assert likelihood[1] / likelihood[2] == pytest.approx(math.exp(MAX_TWIN_LOG_RATIO))
+
+
+def test_a_room_seen_through_a_door_from_a_few_views_is_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    sizes = {"hall": 3, "bedroom_a": 2, "bedroom_b": 2}
+    queries = [
+        ("hall", {"hall": 100.0, "bedroom_a": 90.0}),  # at the bedroom's door
+        ("hall", {"hall": 100.0, "bedroom_a": 5.0}),
+        ("hall", {"hall": 100.0, "bedroom_a": 4.0}),
+        ("bedroom_a", {"bedroom_a": 60.0, "bedroom_b": 70.0, "hall": 50.0}),
+        ("bedroom_a", {"bedroom_a": 60.0, "bedroom_b": 65.0}),
+        ("bedroom_b", {"bedroom_b": 60.0, "bedroom_a": 75.0}),
+        ("bedroom_b", {"bedroom_b": 60.0, "bedroom_a": 62.0}),
+    ]
+    samples = CalibrationSamples.from_queries(queries, sizes)
+    assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
