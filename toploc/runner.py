@@ -224,17 +224,27 @@ class LocalizationRunner:
 
     def stop(self, wait_s: float = 2.0) -> bool:
         """End the running localization at its next capture or move, refuse new ones, and wait
-        up to ``wait_s`` seconds for it to end; whether it did."""
+        up to ``wait_s`` seconds for it to end; whether it did.
+
+        The base is told to stop again every ``POLL_S`` while the localization holds the robot:
+        a move that passed its stopping check just before the first stop clears the base's stop
+        when it starts (a base cannot tell a stop meant for the move it is starting from an old
+        one), and the next stop ends it.
+        """
         self._stopping.set()
-        if self._run_lock.locked():
+        deadline_s = time.monotonic() + wait_s
+        while self._run_lock.locked():
             try:
                 self.robot.stop()  # a move in progress returns early
             except Exception as error:  # stopping must go on whatever the base says
                 _log.warning("could not stop the robot: %s", error)
-        ended = self._run_lock.acquire(timeout=wait_s)
-        if ended:
-            self._run_lock.release()
-        return ended
+            remaining_s = deadline_s - time.monotonic()
+            if remaining_s <= 0:
+                return False
+            if self._run_lock.acquire(timeout=min(POLL_S, remaining_s)):
+                self._run_lock.release()
+                return True
+        return True
 
     def replace_map(self, loaded: LoadedMap) -> bool:
         """Swap in ``loaded`` (the map re-read after it grew) between localizations: waits for a

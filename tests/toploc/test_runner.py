@@ -3,6 +3,7 @@ and ``toploc demo`` end to end on the small rendered map."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import shutil
 import threading
@@ -22,7 +23,7 @@ from toploc.bus import BusConfig, open_session
 from toploc.bus.messages import check_belief
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient
-from toploc.runner import LocalizationRunner, NoPlacesYetError
+from toploc.runner import LocalizationRunner, LocalizationStoppedError, NoPlacesYetError
 from toploc.service import start_service
 
 CAMERA = PanoramaCamera(512, 96)
@@ -45,6 +46,32 @@ class GatedRobot(RobotWrapper):
         self.waiting.set()
         self.gate.wait(10)
         return self.robot.capture()
+
+
+class LateStopRobot(RobotWrapper):
+    """A base whose move lets a stop in after the caller's stopping check and before the move
+    starts, then clears it on starting (as ``P2osBase.move`` does), and drives for ``move_s``
+    unless stopped again."""
+
+    def __init__(self, robot: SimulatedRobot, move_s: float = 30.0) -> None:
+        super().__init__(robot)
+        self.move_s = move_s
+        self.moving, self.stopped = threading.Event(), threading.Event()
+        self.stops = 0
+        self.cut_short: bool | None = None
+
+    def move(self, turn_rad: float, forward_m: float):
+        self.moving.set()
+        while self.stops == 0:  # the first stop lands in the window
+            self.stopped.wait(0.01)
+        self.stopped.clear()  # the move starts and forgets it
+        self.cut_short = self.stopped.wait(self.move_s)
+        return self.robot.move(turn_rad, forward_m)
+
+    def stop(self) -> None:
+        self.stops += 1
+        self.stopped.set()
+        self.robot.stop()
 
 
 @pytest.fixture(scope="module")
@@ -123,3 +150,20 @@ def test_serve_refuses_a_missing_map_unless_asked_to_create_it(tmp_path):
     result = CliRunner().invoke(main, ["serve", "--db", str(missing), "--robot-id", "n1"])
     assert result.exit_code == 2 and "--new-map creates it empty" in result.output
     assert not missing.exists()
+
+
+def test_a_stop_that_lands_just_before_a_move_starts_still_ends_the_move(loaded):
+    robot = LateStopRobot(robot_in("kitchen", 2.0, 3.0))
+    runner = LocalizationRunner(Localizer(loaded), robot)
+
+    def drive() -> None:
+        with runner.driving() as held, contextlib.suppress(LocalizationStoppedError):
+            held.move(0.0, 0.5)
+
+    worker = threading.Thread(target=drive)
+    worker.start()
+    assert robot.moving.wait(10)
+    assert runner.stop(wait_s=10.0)
+    worker.join(10)
+    assert robot.cut_short is True
+    assert robot.stops >= 2
