@@ -199,7 +199,7 @@ def test_add_errors(tmp_path: Path, db_path: Path) -> None:
     assert result.exit_code == 1 and "bad.png" in result.stderr and "corrupt" in result.stderr
     half = run("add", bad, "--db", db_path, "--room", "lab", "--x-m", "1")
     assert half.exit_code == 2 and "both --x-m and --y-m" in half.stderr
-    assert table_counts(db_path)["places"] == 0
+    assert not db_path.exists()  # refused before a place was written: no empty map is left
 
 
 def test_connect_unknown_room_and_missing_database(filled_map: MapDatabase, tmp_path) -> None:
@@ -277,8 +277,27 @@ def test_add_refuses_a_four_by_three_photo_naming_it(tmp_path: Path, db_path: Pa
     result = run("add", photo, "--db", db_path, "--room", "lab", "--no-calibrate")
     assert result.exit_code == 1
     assert f"{photo}: 640x480 px (1.33:1) is not a 360° panorama" in result.output
+    assert result.output.count(str(photo)) == 1
     assert "--camera equirect or --camera cylinder" in result.output
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_a_refused_first_add_leaves_no_empty_map_behind(tmp_path: Path, db_path: Path) -> None:
+    photo = write_image(tmp_path / "photo.png", 1, size_px=(640, 480))
+    result = run("add", photo, "--db", db_path, "--room", "lab", "--no-calibrate")
+    assert result.exit_code == 1
+    assert list(tmp_path.iterdir()) == [photo]
+
+
+@pytest.mark.skipif(not _real_extraction_available(), reason="localizer.features unavailable")
+def test_a_refused_add_into_an_existing_map_keeps_the_map(tmp_path: Path, db_path: Path) -> None:
+    with MapDatabase.open(db_path) as map_db:
+        map_db.add_room("lab")
+    photo = write_image(tmp_path / "photo.png", 1, size_px=(640, 480))
+    result = run("add", photo, "--db", db_path, "--room", "lab", "--no-calibrate")
+    assert result.exit_code == 1
     with MapDatabase.open(db_path, readonly=True) as map_db:
+        assert [room.name for room in map_db.rooms()] == ["lab"]
         assert map_db.places() == []
 
 

@@ -81,6 +81,30 @@ def _map_errors() -> Iterator[None]:
         raise click.ClickException(str(error)) from error
 
 
+@contextmanager
+def _removed_if_left_empty(db_path: Path) -> Iterator[None]:
+    """Within the block, a map file that did not exist before is deleted again if the block
+    fails and the map was left without a place (a refused first ``map add`` leaves no empty
+    map behind); an existing file is never touched."""
+    existed = db_path.exists()
+    try:
+        yield
+    except BaseException:
+        if not existed and db_path.exists() and _has_no_places(db_path):
+            for path in (db_path, *(Path(f"{db_path}{tail}") for tail in ("-wal", "-shm"))):
+                path.unlink(missing_ok=True)
+        raise
+
+
+def _has_no_places(db_path: Path) -> bool:
+    """Whether the map at ``db_path`` opens and holds no place (False if it cannot be read)."""
+    try:
+        with MapDatabase.open(db_path, readonly=True) as map_db:
+            return map_db.info().n_places == 0
+    except MapDatabaseError:
+        return False
+
+
 def _raise_interrupt(signum: int, _frame: object) -> None:
     raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
 
@@ -293,13 +317,15 @@ def add_command(
         raise click.ClickException(f"--room: {error}") from None
     given = parse_detectors(detectors) if detectors else ()
     entry = ManifestEntry(image.name, image, room.strip(), x_m, y_m, heading_deg, line=0)
-    with _map_errors(), MapDatabase.open(db_path) as map_db:
-        presets = _presets_for(map_db, given)
-        extractor = resolve_extractor(presets, camera, _overrides(map_db, read_width_px))
-        report = build_map(map_db, [entry], extractor, workers=0, progress=False)
-    (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
-    if outcome.status is Status.FAILED:
-        raise click.ClickException(f"{image}: {outcome.message}")
+    with _map_errors(), _removed_if_left_empty(db_path):
+        with MapDatabase.open(db_path) as map_db:
+            presets = _presets_for(map_db, given)
+            extractor = resolve_extractor(presets, camera, _overrides(map_db, read_width_px))
+            report = build_map(map_db, [entry], extractor, workers=0, progress=False)
+        (outcome,) = report.outcomes or [Outcome(image.name, Status.FAILED, message="interrupted")]
+        if outcome.status is Status.FAILED:
+            named = outcome.message.startswith((f"{image}:", f"{image.name}:"))
+            raise click.ClickException(outcome.message if named else f"{image}: {outcome.message}")
     click.echo(outcome.describe())
     if calibrate and outcome.status is Status.ADDED:
         with _map_errors():
