@@ -278,7 +278,8 @@ class CalibrationSamples:
     n_lookalike: int = 0
     lookalike_pairs: tuple[tuple[str, str], ...] = ()
     """The look-alike rooms found, each pair once (sorted names): rooms each of which explained
-    at least half of the other's queries as a look-alike."""
+    at least half of the other's queries nearly as well as their own room
+    (:meth:`from_queries`' ``pair_fraction``)."""
 
     @classmethod
     def from_queries(
@@ -288,9 +289,18 @@ class CalibrationSamples:
         lookalike_min_inliers: float = 20.0,
         lookalike_fraction: float = 0.8,
         chance_fraction: float = 0.1,
+        pair_fraction: float = 0.5,
     ) -> CalibrationSamples:
         """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
-        per room) says whether the query's room had another place to match."""
+        per room) says whether the query's room had another place to match.
+
+        Two rooms are a look-alike pair when each explains at least half of the other's
+        queries at ``pair_fraction`` of the query's own count or more (and at least
+        ``lookalike_min_inliers``). That is looser than a query's own twin test
+        (``lookalike_fraction``): a room recorded at places a metre apart explains its own
+        views better than the twin does (office_a 209 spread inliers, office_b 110 on a map
+        recorded with three places per office, every other room at most 13), yet the twin
+        explains every one of them."""
         same: list[float] = []
         other: list[float] = []
         max_other: list[float] = []
@@ -303,8 +313,13 @@ class CalibrationSamples:
             others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
             bar = max(lookalike_min_inliers, lookalike_fraction * own)
             twins = [r for r in room_sizes if r != own_room and float(best.get(r, 0.0)) >= bar]
+            pair_bar = max(lookalike_min_inliers, pair_fraction * own)
             asked[own_room] += 1
-            flagged.update((own_room, room) for room in twins)
+            flagged.update(
+                (own_room, r)
+                for r in room_sizes
+                if r != own_room and float(best.get(r, 0.0)) >= pair_bar
+            )
             lookalikes = [float(best.get(room, 0.0)) for room in twins]
             if lookalikes:
                 n_lookalike += len(lookalikes)
@@ -406,6 +421,13 @@ different spots can. Counterparts recorded by hand stand a few decimetres apart,
 near one of them favours its room by that offset alone (0.2 m cost a third of the inliers in
 ``building``; on held-out recorded maps, uncapped, 2 of 20 first looks came out sure and
 wrong that way)."""
+
+
+MAX_PAIRED_LOG_RATIO = 2.0 * MAX_TWIN_LOG_RATIO
+"""The most a paired reading (two frames, one homed to each place of a counterpart pair,
+:func:`localizer.lookalikes.paired_log_ratio`) moves the odds of two look-alike rooms: two
+frames' worth of :data:`MAX_TWIN_LOG_RATIO`, a factor of 16, so that one pair can settle the
+twins (localized asks for 10)."""
 
 
 def lookalike_log_ratios(

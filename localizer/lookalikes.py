@@ -20,12 +20,19 @@ pair the frame verified (one frame moves their odds by at most
 (:func:`localizer.likelihood.lookalike_log_ratios`): the counts say nothing about which twin it
 is, and the active loop must drive to a counterpart place.
 
+Counterparts recorded by hand stand a few decimetres apart, and a frame taken where the robot
+homed to one of them favours that one by the offset alone, whichever twin the robot is in; so
+that frame does not read the pair. Its counts are kept instead (:func:`homed_reading`), and
+when the robot has homed to the pair's other place and looked there too, the two frames are
+read together (:func:`paired_log_ratio`): each favours the place homed to by the same offset,
+the sum cancels it, and what is left is what only one room shows.
+
 Pure core: numpy, no I/O.
 """
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from typing import TypeVar
 
 import numpy as np
@@ -169,3 +176,40 @@ def twin_counts(
         for member, value in best[1].items():
             out[member] = value
     return out, tuple(aliased)
+
+
+def homed_reading(
+    evidence: Sequence[PlaceScore],
+    at_place: int,
+    counterparts: Iterable[int],
+    *,
+    count: str,
+) -> dict[int, float]:
+    """Half of a paired reading: the counts (``count``, :func:`place_count`) a frame taken where
+    the robot homed to ``at_place`` gives that place and each of its ``counterparts`` it
+    verified, ``{place_id: count}``; empty unless it verified ``at_place`` and at least one
+    counterpart."""
+    by_id = {int(item.place_id): item for item in evidence}
+    if at_place not in by_id:
+        return {}
+    reading = {at_place: place_count(by_id[at_place], count)}
+    reading.update({q: place_count(by_id[q], count) for q in counterparts if q in by_id})
+    return reading if len(reading) > 1 else {}
+
+
+def paired_log_ratio(
+    at_p: Mapping[int, float],
+    at_q: Mapping[int, float],
+    p: int,
+    q: int,
+    log_ratio: Callable[[np.ndarray], np.ndarray],
+) -> float:
+    """Log odds of ``p``'s room over ``q``'s (counterparts in two look-alike rooms) from two
+    frames: ``at_p`` homed to ``p``, ``at_q`` homed to ``q`` (:func:`homed_reading` of each).
+
+    ``[f(at_p[p]) - f(at_p[q])] + [f(at_q[p]) - f(at_q[q])]`` with ``f = log_ratio`` (the
+    likelihood's per-count log ratio): each frame favours the place homed to by the offset
+    between ``p`` and ``q``, by the same amount both ways, and the sum cancels it. ``KeyError``
+    if a frame lacks one of the two places."""
+    values = log_ratio(np.array([at_p[p], at_p[q], at_q[p], at_q[q]], dtype=float))
+    return float((values[0] - values[1]) + (values[2] - values[3]))
