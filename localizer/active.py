@@ -84,14 +84,9 @@ def active_step(
     max_targets: int,
 ) -> int | None:
     """The place to drive to next, or ``None`` when active localization is done: the belief is
-    not ambiguous, ``max_targets`` places have been tried, or the policy has nothing left.
-    An untried place the context is ``awaiting`` (the other half of a paired reading) comes
-    before the policy's choice, lowest id first."""
+    not ambiguous, ``max_targets`` places have been tried, or the policy has nothing left."""
     if belief.state is not LocalizationState.AMBIGUOUS or len(context.tried) >= max_targets:
         return None
-    waiting = sorted(context.awaiting - context.tried)
-    if waiting:
-        return waiting[0]
     return policy.choose(belief, evidence, places, context)
 
 
@@ -161,11 +156,8 @@ def localize_actively(
         frames += len(homing.lengths) + 1
         distance += homing.distance_m
         localizer.predict(HOMING_STAY_PROBABILITY)
-        observation = replace(
-            localizer.observe(robot.capture().image), at_place=target, arrived=homing.arrived
-        )
+        observation = replace(localizer.observe(robot.capture().image), at_place=target)
         belief = localizer.update(observation)
-        context = replace(context, awaiting=localizer.awaiting())
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
         if homing.reason == CANCELLED:

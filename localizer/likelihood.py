@@ -423,13 +423,6 @@ near one of them favours its room by that offset alone (0.2 m cost a third of th
 wrong that way)."""
 
 
-MAX_PAIRED_LOG_RATIO = 2.0 * MAX_TWIN_LOG_RATIO
-"""The most a paired reading (two frames, one homed to each place of a counterpart pair,
-:func:`localizer.lookalikes.paired_log_ratio`) moves the odds of two look-alike rooms: two
-frames' worth of :data:`MAX_TWIN_LOG_RATIO`, a factor of 16, so that one pair can settle the
-twins (localized asks for 10)."""
-
-
 def lookalike_log_ratios(
     log_ratios: np.ndarray,
     aliased: Sequence[Sequence[int]] = (),

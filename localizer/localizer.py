@@ -23,18 +23,10 @@ from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateT
 from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, QueryEvidence, evaluate_place, place_evidence
 from localizer.features import extract_with_camera, matching_overrides
-from localizer.likelihood import (
-    MAX_PAIRED_LOG_RATIO,
-    Likelihood,
-    RatioLikelihood,
-    room_inliers,
-    room_likelihood,
-)
+from localizer.likelihood import Likelihood, RatioLikelihood, room_inliers, room_likelihood
 from localizer.lookalikes import (
     EXACT_COUNTERPART_SHARE,
-    homed_reading,
     lookalike_groups,
-    paired_log_ratio,
     partners_of,
     twin_counts,
 )
@@ -153,14 +145,12 @@ class LoadedMap:
 class Observation:
     """One panorama seen by the localizer: its fingerprint, its evidence and the timings (ms);
     ``at_place``: the place the robot homed to before capturing it (None: it was not driven
-    to one; see :func:`localizer.lookalikes.twin_counts`); ``arrived``: whether that homing
-    said it arrived (only then is the frame half of a paired reading)."""
+    to one; see :func:`localizer.lookalikes.twin_counts`)."""
 
     fingerprint: Fingerprint
     evidence: QueryEvidence
     timing_ms: Mapping[str, float]
     at_place: int | None = None
-    arrived: bool = False
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
@@ -188,7 +178,6 @@ class Localizer:
         self.map = loaded
         self.filter = BeliefFilter(loaded.rooms, loaded.edges, self.config.stay_probability)
         self._similarity: dict[tuple[int, int], int] = {}
-        self._halves: dict[int, dict[int, float]] = {}  # place homed to -> its half reading
         self.likelihood: Likelihood = (
             self.config.likelihood or loaded.likelihood or RatioLikelihood()
         )
@@ -282,48 +271,11 @@ class Localizer:
         return None
 
     def update(self, observation: Observation) -> RoomBelief:
-        """Fold an observation into the belief (Bayes update) and return the new belief.
-
-        A frame taken where the robot homed to a place whose counterparts stand off its spot
-        is also half of a paired reading: kept until the robot has homed to one of those
-        counterparts and looked there, and then read with that frame
-        (:func:`~localizer.lookalikes.paired_log_ratio`, at most
-        :data:`~localizer.likelihood.MAX_PAIRED_LOG_RATIO` apart)."""
+        """Fold an observation into the belief (Bayes update) and return the new belief."""
         likelihood = self.frame_likelihood(observation)
-        self.filter.update(self._with_paired_reading(observation, likelihood))
+        self.filter.update(likelihood)
         self.latest = observation
         return self.belief()
-
-    def awaiting(self) -> frozenset[int]:
-        """The places whose frame would complete a paired reading (see :meth:`update`): the
-        counterparts verified in a kept half."""
-        return frozenset(q for p, half in self._halves.items() for q in half if q != p)
-
-    def _with_paired_reading(self, observation: Observation, likelihood: np.ndarray) -> np.ndarray:
-        """``likelihood`` moved by the paired reading ``observation`` completes, if any (the
-        half it begins is kept instead)."""
-        model = self.likelihood
-        p = self._inexact_counterpart(observation.at_place)
-        if p is None or not observation.arrived or not isinstance(model, RatioLikelihood):
-            return likelihood
-        half = homed_reading(
-            observation.evidence.places, p, self.counterparts[p], count=model.count
-        )
-        if not half:
-            return likelihood
-        for q in sorted(self.counterparts[p]):
-            other = self._halves.get(q, {})
-            if q in half and p in other:
-                del self._halves[q]
-                log_odds = paired_log_ratio(half, other, p, q, model.log_ratio)
-                log_odds = float(np.clip(log_odds, -MAX_PAIRED_LOG_RATIO, MAX_PAIRED_LOG_RATIO))
-                moved = np.array(likelihood, dtype=float)
-                room_index = {room: i for i, room in enumerate(self.map.rooms)}
-                moved[room_index[self.map.place(p).room]] *= np.exp(log_odds / 2.0)
-                moved[room_index[self.map.place(q).room]] *= np.exp(-log_odds / 2.0)
-                return moved / moved.sum()
-        self._halves[p] = half
-        return likelihood
 
     def predict(self, stay_probability: float | None = None) -> None:
         """The robot moved: spread the belief along the room graph."""
@@ -333,7 +285,6 @@ class Localizer:
         """Uniform belief (global localization), or ``prior`` (``{room: weight}``)."""
         self.filter.reset(prior)
         self.latest = None
-        self._halves = {}
         return self.belief()
 
     def belief(self, state: LocalizationState | None = None) -> RoomBelief:

@@ -20,19 +20,12 @@ pair the frame verified (one frame moves their odds by at most
 (:func:`localizer.likelihood.lookalike_log_ratios`): the counts say nothing about which twin it
 is, and the active loop must drive to a counterpart place.
 
-Counterparts recorded by hand stand a few decimetres apart, and a frame taken where the robot
-homed to one of them favours that one by the offset alone, whichever twin the robot is in; so
-that frame does not read the pair. Its counts are kept instead (:func:`homed_reading`), and
-when the robot has homed to the pair's other place and looked there too, the two frames are
-read together (:func:`paired_log_ratio`): each favours the place homed to by the same offset,
-the sum cancels it, and what is left is what only one room shows.
-
 Pure core: numpy, no I/O.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from typing import TypeVar
 
 import numpy as np
@@ -138,10 +131,11 @@ def twin_counts(
     ``at_place``: the place the robot homed to before this frame. Homing stops where that
     place's view is matched best, so its count there beats its counterpart's by however far the
     counterpart stands from the exact spot (0.2 m cost a third of the inliers in ``building``),
-    whichever room the robot is in: no pair with that place is read, only the frame's other
-    counterpart pairs (on a grid, the neighbours' pairs, equally far from the robot). The
-    localizer passes it only when a counterpart of that place stands off its spot
-    (:data:`EXACT_COUNTERPART_SHARE`).
+    whichever room the robot is in: a pair with that place is read only when the place homed
+    to loses it (its counterpart's room then shows more although the offset favoured the
+    place homed to); the frame's other counterpart pairs are read as usual (on a grid, the
+    neighbours' pairs, equally far from the robot). The localizer passes it only when a
+    counterpart of that place stands off its spot (:data:`EXACT_COUNTERPART_SHARE`).
     """
     out = np.array(counts, dtype=float)
     by_id = {int(item.place_id): item for item in evidence}
@@ -153,21 +147,22 @@ def twin_counts(
             member = room_index.get(item.room, -1)
             if member not in group:
                 continue
-            if int(item.place_id) == at_place:
-                continue
             read = {member: place_count(item, count)}
+            read_from = {member: int(item.place_id)}
             for other in group:
                 if other == member:
                     continue
                 found = [
-                    place_count(by_id[p], count)
+                    (place_count(by_id[p], count), p)
                     for p in counterparts.get(int(item.place_id), ())
-                    if p in by_id and by_id[p].room == rooms[other] and p != at_place
+                    if p in by_id and by_id[p].room == rooms[other]
                 ]
                 if not found:
                     break
-                read[other] = max(found)
+                read[other], read_from[other] = max(found)
             else:
+                if _homed_place_wins(read, read_from, at_place):
+                    continue
                 if best is None or read[member] > best[0]:
                     best = (read[member], read)
         if best is None:
@@ -178,38 +173,14 @@ def twin_counts(
     return out, tuple(aliased)
 
 
-def homed_reading(
-    evidence: Sequence[PlaceScore],
-    at_place: int,
-    counterparts: Iterable[int],
-    *,
-    count: str,
-) -> dict[int, float]:
-    """Half of a paired reading: the counts (``count``, :func:`place_count`) a frame taken where
-    the robot homed to ``at_place`` gives that place and each of its ``counterparts`` it
-    verified, ``{place_id: count}``; empty unless it verified ``at_place`` and at least one
-    counterpart."""
-    by_id = {int(item.place_id): item for item in evidence}
-    if at_place not in by_id:
-        return {}
-    reading = {at_place: place_count(by_id[at_place], count)}
-    reading.update({q: place_count(by_id[q], count) for q in counterparts if q in by_id})
-    return reading if len(reading) > 1 else {}
-
-
-def paired_log_ratio(
-    at_p: Mapping[int, float],
-    at_q: Mapping[int, float],
-    p: int,
-    q: int,
-    log_ratio: Callable[[np.ndarray], np.ndarray],
-) -> float:
-    """Log odds of ``p``'s room over ``q``'s (counterparts in two look-alike rooms) from two
-    frames: ``at_p`` homed to ``p``, ``at_q`` homed to ``q`` (:func:`homed_reading` of each).
-
-    ``[f(at_p[p]) - f(at_p[q])] + [f(at_q[p]) - f(at_q[q])]`` with ``f = log_ratio`` (the
-    likelihood's per-count log ratio): each frame favours the place homed to by the offset
-    between ``p`` and ``q``, by the same amount both ways, and the sum cancels it. ``KeyError``
-    if a frame lacks one of the two places."""
-    values = log_ratio(np.array([at_p[p], at_p[q], at_q[p], at_q[q]], dtype=float))
-    return float((values[0] - values[1]) + (values[2] - values[3]))
+def _homed_place_wins(
+    read: Mapping[int, float], read_from: Mapping[int, int], at_place: int | None
+) -> bool:
+    """Whether a counterpart reading (``read``: count per room; ``read_from``: the place each
+    count came from) takes a count from ``at_place``, the place homed to, and that count is
+    the reading's highest: what the offset alone would give."""
+    homed = [room for room, place in read_from.items() if place == at_place]
+    if not homed:
+        return False
+    rivals = [value for room, value in read.items() if room != homed[0]]
+    return read[homed[0]] >= max(rivals)

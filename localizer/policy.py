@@ -82,9 +82,7 @@ class PolicyContext:
     stored views costs time, so a policy asks for just the entries it reads).
     ``lookalikes``: per room, the rooms the map's calibration found it looks like;
     ``counterparts``: per place id, the places of its look-alike rooms at the same spot of their
-    frames (:mod:`localizer.lookalikes`). ``awaiting``: places whose frame would complete a
-    paired reading the localizer keeps half of (:meth:`localizer.localizer.Localizer.awaiting`);
-    :func:`localizer.active.active_step` drives there before asking the policy.
+    frames (:mod:`localizer.lookalikes`).
     """
 
     tried: frozenset[int] = frozenset()
@@ -92,7 +90,6 @@ class PolicyContext:
     similarity: SimilarityFunction | None = None
     lookalikes: Mapping[str, frozenset[str]] = field(default_factory=dict)
     counterparts: Mapping[int, frozenset[int]] = field(default_factory=dict)
-    awaiting: frozenset[int] = frozenset()
 
     def trying(self, place_id: int) -> PolicyContext:
         """The same context with ``place_id`` added to ``tried``."""

@@ -11,10 +11,9 @@ import pytest
 
 from localizer.belief import LocalizationState
 from localizer.cameras import CameraSpec
-from localizer.evidence import PlaceEvidence, QueryEvidence
 from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig, Observation, to_grey
+from localizer.localizer import LoadedMap, Localizer, to_grey
 from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
@@ -152,42 +151,3 @@ def test_a_room_of_one_place_must_win_by_more_to_be_localized(top_room: str, sta
     belief = localizer.reset({top_room: 15.0, other: 1.0})  # 15 to 1: between 10 and 20
     assert belief.state is LocalizationState(state)
     assert localizer.map.places_per_room == {"attic": 1, "cellar": 2}
-
-
-def _frame(loaded: LoadedMap, counts: dict[int, float], at_place: int) -> Observation:
-    """An observation whose evidence gives ``counts`` (place id -> inliers, spread over the
-    whole horizon), taken where the robot homed to ``at_place`` and arrived."""
-    room_of = {place.id: place.room for place in loaded.places}
-    no_pairs = np.zeros((0, 2), dtype=np.int64)
-    places = tuple(
-        PlaceEvidence(pid, room_of[pid], int(n), int(n), 0.0, no_pairs, 1.0)
-        for pid, n in sorted(counts.items(), key=lambda item: -item[1])
-    )
-    fingerprint = loaded.fingerprint(at_place)
-    return Observation(fingerprint, QueryEvidence(places, {}), {}, at_place=at_place, arrived=True)
-
-
-def test_two_frames_homed_to_counterparts_standing_apart_are_read_together(building_map):
-    loaded = LoadedMap.from_snapshot(load_snapshot(building_map[0]))
-    office_a = [p for p in loaded.places if p.room == "office_a"]
-    office_b = [p for p in loaded.places if p.room == "office_b"]
-    # declared counterparts that stand apart in their frames (so neither frame reads the pair)
-    p, q = max(
-        ((a, b) for a in office_a for b in office_b),
-        key=lambda pair: math.dist(pair[0].xy_m, pair[1].xy_m),
-    )
-    model = replace(
-        loaded.likelihood, lookalikes=(("office_a", "office_b"),), counterparts=((p.id, q.id),)
-    )
-    localizer = Localizer(loaded, LocalizerConfig(likelihood=model))
-    # in office_a: each frame favours the place homed to by the offset; office_a's place gets
-    # 12 more at both spots (what only office_a shows)
-    first = localizer.update(_frame(loaded, {p.id: 162.0, q.id: 100.0}, p.id))
-    assert first.as_dict()["office_a"] == pytest.approx(first.as_dict()["office_b"])
-    assert localizer.awaiting() == {q.id}
-    second = localizer.update(_frame(loaded, {p.id: 112.0, q.id: 150.0}, q.id))
-    f = model.log_ratio
-    expected = (f(np.array(162.0)) - f(np.array(100.0))) + (f(np.array(112.0)) - f(np.array(150.0)))
-    ratio = second.as_dict()["office_a"] / second.as_dict()["office_b"]
-    assert 1.0 < ratio == pytest.approx(math.exp(float(expected)))
-    assert localizer.awaiting() == frozenset()

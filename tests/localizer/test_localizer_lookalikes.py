@@ -17,10 +17,8 @@ from localizer.likelihood import (
     room_inliers,
 )
 from localizer.lookalikes import (
-    homed_reading,
     is_counterpart,
     lookalike_groups,
-    paired_log_ratio,
     pairs_without_counterparts,
     partners_of,
     twin_counts,
@@ -143,7 +141,7 @@ def test_look_alike_pairs_no_counterpart_joins_are_the_blind_ones():
     assert pairs_without_counterparts(pairs, [(3, 13)], room_of) == (("bedroom_a", "bedroom_b"),)
 
 
-def test_a_frame_at_the_place_driven_to_is_not_read_on_that_place():
+def test_a_frame_at_the_place_driven_to_is_not_read_on_that_place_when_it_wins():
     # homed to office_a's 3: its count beats its counterpart's by how far 13 stands off the spot
     evidence = [Score(3, "office_a", 150), Score(13, "office_b", 90)]
     counts = room_inliers(evidence, ROOMS, count="inliers")
@@ -151,6 +149,16 @@ def test_a_frame_at_the_place_driven_to_is_not_read_on_that_place():
         evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers", at_place=3
     )
     assert aliased == OFFICES
+
+
+def test_a_frame_at_the_place_driven_to_is_read_on_its_pair_when_the_counterpart_wins():
+    # homed to office_a's 3, yet office_b's 13 explains the frame better: against the offset
+    evidence = [Score(3, "office_a", 90), Score(13, "office_b", 150)]
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    read, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers", at_place=3
+    )
+    assert aliased == () and (read[1], read[2]) == (90, 150)
 
 
 def test_a_frame_at_the_place_driven_to_is_read_on_the_other_pairs():
@@ -209,33 +217,3 @@ def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_
     ]
     samples = CalibrationSamples.from_queries(queries, sizes)
     assert samples.lookalike_pairs == (("office_a", "office_b"),)
-
-
-def test_a_frame_homed_to_a_place_keeps_its_counts_and_its_counterparts():
-    evidence = [Score(3, "office_a", 150), Score(13, "office_b", 90), Score(7, "kitchen", 4)]
-    assert homed_reading(evidence, 3, [13, 23], count="inliers") == {3: 150.0, 13: 90.0}
-
-
-def test_a_frame_that_did_not_verify_the_place_homed_to_is_no_half_reading():
-    evidence = [Score(13, "office_b", 90)]
-    assert homed_reading(evidence, 3, [13], count="inliers") == {}
-    assert homed_reading([Score(3, "office_a", 150)], 3, [13], count="inliers") == {}
-
-
-@given(
-    offset=st.floats(0.0, 150.0),
-    own=st.floats(100.0, 400.0),
-    door=st.floats(0.0, 40.0),
-)
-def test_a_paired_reading_cancels_the_offset_and_keeps_what_one_room_shows(offset, own, door):
-    # the robot is in p's room: at each spot the place homed to gets ``own`` and its pair
-    # ``own - offset``, and p's room's place gets ``door`` more for the view through its door
-    model = RatioLikelihood(max_log_ratio=1e9)
-
-    def linear(counts: np.ndarray) -> np.ndarray:
-        return model.per_inlier * counts  # a linear f: the cancellation is exact
-
-    at_p = {3: own + door, 13: own - offset}
-    at_q = {3: own - offset + door, 13: own}
-    log_odds = paired_log_ratio(at_p, at_q, 3, 13, linear)
-    assert log_odds == pytest.approx(2 * model.per_inlier * door, abs=1e-9)
