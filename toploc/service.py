@@ -22,6 +22,11 @@ localizer keys answer "the map has no places yet" until the first places are rec
 
 toploc's built-in world map (the demo's, served when no map is named: ``builtin_map``) is never
 written through the bus: ``map/add`` and ``map/connect`` reply with :data:`BUILTIN_MAP_REFUSAL`.
+
+A robot of a site (``map_from``: a site map's id, docs/site.md) localizes on a replica of
+that map, ``db_path`` a file of its own: :class:`~toploc.replication.MapReplicator` keeps it
+current and hands each update to the :class:`MapRefresher`; the robot's ``map/*`` keys read
+the replica and pass writes on to the site map's node; each belief carries ``map_age_s``.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +45,7 @@ from localizer.features import params_from_preset
 from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Camera, Robot
 from mapdb.database import MapDatabase
+from mapdb.errors import ReplicaError
 from mapdb.loading import open_for_reading
 from toploc import bus
 from toploc.bus import BusConfig, open_session
@@ -51,9 +57,12 @@ from toploc.nodes.localizer import LocalizerNode
 from toploc.nodes.mapdb import MapNode, subscribe_changes
 from toploc.nodes.robot import RemoteRobot, RobotNode
 from toploc.nodes.ros2 import Ros2Bridge, Ros2Settings
+from toploc.replication import MapReplicator
 from toploc.runner import LocalizationRunner
 
 REFRESH_SETTLE_S = 2.0
+REPLICA_WAIT_S = 10.0
+"""How long a site robot's service waits at start for its replica to be current."""
 BUILTIN_MAP_REFUSAL = (
     "{db} is toploc's built-in map of a rendered world (the demo's), which the bus does not "
     "write to: to record your own map, serve one with toploc serve --db FILE --new-map (or "
@@ -189,6 +198,8 @@ class Service:
     localizer: Localizer | None
     refresher: MapRefresher
     homing: HomingService | None = None
+    replicator: MapReplicator | None = None
+    """A site robot's replica keeper (``map_from``), else None."""
 
 
 @dataclass(frozen=True)
@@ -234,6 +245,7 @@ def enter_localizer_nodes(
     refresh_settle_s: float = REFRESH_SETTLE_S,
     recalibrate: bool = True,
     allow_empty: bool = False,
+    map_age: Callable[[], float | None] | None = None,
 ) -> LocalizerNodes:
     """The localizer and homing nodes on the map at ``db_path`` (``toploc node localizer``),
     driving the bus's robot node (:class:`RemoteRobot`). The map is reloaded after each
@@ -255,7 +267,7 @@ def enter_localizer_nodes(
         localizer, remote, policy, max_pending=limits.max_pending_localizations,
         localizer_config=localizer_config,
     )  # fmt: skip
-    node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits))
+    node = stack.enter_context(LocalizerNode(session, robot_id, runner, limits, map_age))
     runner.publish = node.publish
     homing = HomingService(runner)  # homing/*; also how an active localization drives
     homing.publish = stack.enter_context(HomingNode(session, robot_id, homing, limits)).publish
@@ -278,19 +290,52 @@ def enter_map_node(
     localizer_config: LocalizerConfig | None = None,
     refresh_settle_s: float = REFRESH_SETTLE_S,
     builtin_map: bool = False,
+    map_id: str | None = None,
+    forward_to: str | None = None,
 ) -> MapNode:
     """The map node of ``db_path`` (``toploc node map``); ``map/add`` reads panoramas with the
     localizer's camera model and extracts its detector into an empty map. ``builtin_map``:
-    ``db_path`` is toploc's own world map, which the node refuses to write."""
+    ``db_path`` is toploc's own world map, which the node refuses to write. ``map_id``: serve
+    it as that site map (``toploc/map/<map_id>/``); ``forward_to``: ``db_path`` is a replica of
+    that site map, whose node takes the writes."""
     localizer_config = localizer_config or LocalizerConfig()
     read_only = BUILTIN_MAP_REFUSAL.format(db=db_path) if builtin_map else None
     return stack.enter_context(
         MapNode(
             session, robot_id, db_path, limits, str(localizer_config.camera),
             detectors=(localizer_config.detector,), refresh_after_s=refresh_settle_s,
-            read_only=read_only,
+            read_only=read_only, map_id=map_id, forward_to=forward_to,
         )
     )  # fmt: skip
+
+
+def enter_replica(
+    stack: ExitStack,
+    session: zenoh.Session,
+    map_id: str,
+    replica_path: Path,
+    wait_s: float = REPLICA_WAIT_S,
+) -> MapReplicator:
+    """The replica of site map ``map_id`` at ``replica_path``, brought up to date first (up to
+    ``wait_s``; a robot whose link is down starts on the replica it has). Raises
+    :class:`~mapdb.errors.ReplicaError` for a replica refused, and for none at all while the map
+    node cannot be reached."""
+    replicator = MapReplicator(session, map_id, replica_path)
+    stack.callback(replicator.close)
+    if not replicator.wait_current(wait_s):
+        state = replicator.state()
+        if state is None or (replicator.error or "").startswith(f"replica {replica_path}"):
+            raise ReplicaError(
+                str(replicator.error) if state is not None
+                else f"no replica of map {map_id} at {replica_path} yet and its map node did not "
+                f"answer within {wait_s:g} s ({replicator.error}): start once with the link up",
+                replica_path,
+            )  # fmt: skip
+        _log.warning(
+            "map %s not reached (%s): localizing from replica %s at version %d", map_id,
+            replicator.error, replica_path, state.version,
+        )  # fmt: skip
+    return replicator
 
 
 def enter_ros2_bridge(
@@ -319,6 +364,7 @@ def start_service(
     recalibrate: bool = True,
     allow_empty: bool = False,
     builtin_map: bool = False,
+    map_from: str | None = None,
 ) -> Iterator[Service]:
     """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
     robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
@@ -330,24 +376,37 @@ def start_service(
     localization is ended (at its next capture or move), then everything is undeclared and the
     session closed (an unclosed session keeps the process alive). The nodes are those of
     ``toploc node robot``, ``localizer`` and ``map`` (the ``enter_*`` functions), on one session.
+    ``map_from``: a site map's id; ``db_path`` is then this robot's replica of it (made or
+    brought up to date first, :func:`enter_replica`), kept current after.
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
+        replicator = None
+        if map_from is not None:
+            replicator = enter_replica(stack, session, map_from, db_path)
+            recalibrate, allow_empty = False, True  # the map's likelihood comes with the map
         if robot is not None:
             enter_robot_node(stack, session, robot_id, robot, limits, camera)
         nodes = enter_localizer_nodes(
             stack, session, robot_id, db_path, policy, localizer_config, limits,
             refresh_settle_s, recalibrate, allow_empty,
+            None if replicator is None else replicator.map_age_s,
         )  # fmt: skip
+        if replicator is not None:
+            replicator.on_updated = nodes.refresher.changed
+            replicator.start()
         # last: a place added as soon as it answers is refreshed too
         enter_map_node(
             stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s,
-            builtin_map,
+            builtin_map, forward_to=map_from,
         )  # fmt: skip
-        yield Service(session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing)
+        yield Service(
+            session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing,
+            replicator,
+        )  # fmt: skip
 
 
 def _has_no_places(db_path: Path) -> bool:

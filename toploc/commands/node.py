@@ -23,6 +23,7 @@ from localizer.localizer import LocalizerConfig
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError
 from robot.p2os_base import P2osError
+from toploc import bus
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import client_bus_config
 from toploc.commands.bus_client import client_options
@@ -231,11 +232,21 @@ def localizer_node(
 @long_running
 @db_option(SHARED_MAP)
 @click.option("--new-map", is_flag=True, help="Create the --db file empty if it does not exist.")
+@click.option(
+    "--map-id",
+    "map_id",
+    metavar="MAP_ID",
+    default=None,
+    help="Serve the map as site map MAP_ID for every robot on the bus (keys toploc/map/MAP_ID/; "
+    "robots run toploc serve --map-from MAP_ID with replicas of their own; docs/site.md). A "
+    "map not yet served under a name takes this one.",
+)
 @camera_option
 @node_options
 def map_node(
     db_path: Path,
     new_map: bool,
+    map_id: str | None,
     camera: str,
     robot_id: str,
     listen: tuple[str, ...],
@@ -248,9 +259,19 @@ def map_node(
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
 
+    if map_id is not None:
+        try:
+            bus.check_map_id(map_id)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint="--map-id") from None
+
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
         enter_map_node(stack, session, robot_id, db_path, limits, localizer_config)
-        return str(db_path)
+        if map_id is None:
+            return str(db_path)
+        enter_map_node(stack, session, robot_id, db_path, limits, localizer_config,
+                       map_id=map_id)  # fmt: skip
+        return f"{db_path} as site map {map_id} (toploc/map/{map_id}/**)"
 
     with map_file(db_path, new_map), ExitStack() as stack:
         stop = _run(config, limits, "map node: ", enter, stack)

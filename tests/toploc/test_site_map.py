@@ -1,0 +1,204 @@
+"""One site map, several robots (issue 22): a router session on 127.0.0.1, the site map's node
+and robot services on replicas of their own, all in this process on real Zenoh sessions and real
+SQLite files. The same in separate processes, with kills: test_site_processes.py."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+from bus_helpers import free_endpoint, wait_for
+from mapdb_helpers import make_fingerprint, new_place
+from test_map_bus import panorama, robot_in
+
+from mapdb.database import MapDatabase
+from mapdb.errors import ReplicaError
+from mapdb.replica import read_snapshot, replica_state, write_snapshot
+from mapdb.replication import encode_snapshot
+from toploc import bus
+from toploc.bus import BusConfig, open_session
+from toploc.bus.clients.site_map import SiteMapClient
+from toploc.bus.png_codec import encode_png
+from toploc.nodes.localizer import LocalizerClient
+from toploc.nodes.mapdb import MapClient, MapNode
+from toploc.service import start_service
+
+SITE = "site-1"
+
+
+def client_config(endpoint: str, robot_id: str = "viewer") -> BusConfig:
+    return BusConfig(robot_id, "client", listen=(), connect=(endpoint,))
+
+
+class Site:
+    """A router on a free port and the site map's node (a copy of the building map) behind it;
+    :meth:`router_down` and :meth:`router_up` stop and start the router."""
+
+    def __init__(self, building_map: Path, root: Path) -> None:
+        self.endpoint = free_endpoint()
+        self.db_path = root / "site.db"
+        shutil.copy(building_map, self.db_path)
+        self.router: zenoh.Session | None = None
+        self.router_up()
+        self.session = open_session(client_config(self.endpoint, "maphost"))
+        self.node = MapNode(self.session, "maphost", self.db_path, map_id=SITE, chunk_bytes=50_000)
+        self.viewer = open_session(client_config(self.endpoint))
+        self.client = SiteMapClient(self.viewer, SITE)
+        assert wait_for(self._answers, 5.0)
+
+    def _answers(self) -> bool:
+        try:
+            self.client.version()
+            return True
+        except bus.BusError:
+            return False
+
+    def version(self) -> int:
+        with MapDatabase.open(self.db_path, readonly=True) as map_db:
+            return map_db.map_version()
+
+    def router_up(self) -> None:
+        self.router = open_session(BusConfig("router", "router", listen=(self.endpoint,)))
+
+    def router_down(self) -> None:
+        assert self.router is not None
+        self.router.close()
+        self.router = None
+
+    def close(self) -> None:
+        self.node.close()
+        for session in (self.viewer, self.session, self.router):
+            if session is not None:
+                session.close()
+
+
+@pytest.fixture
+def site(building_map, tmp_path) -> Iterator[Site]:
+    running = Site(building_map[0], tmp_path)
+    yield running
+    running.close()
+
+
+def robot_service(stack: ExitStack, site: Site, robot_id: str, replica: Path):
+    """A robot service of ``robot_id`` on its replica of the site map, through the router."""
+    robot = robot_in("kitchen", 2.2, 2.9, 75.0)
+    return stack.enter_context(
+        start_service(
+            replica, client_config(site.endpoint, robot_id), robot, refresh_settle_s=0.1,
+            recalibrate=False, map_from=SITE,
+        )
+    )  # fmt: skip
+
+
+def same_rows(replica: Path, site: Site) -> bool:
+    with (
+        MapDatabase.open(replica, readonly=True) as copy,
+        MapDatabase.open(site.db_path, readonly=True) as original,
+    ):
+        return read_snapshot(copy) == read_snapshot(original)
+
+
+def test_a_robot_starts_on_a_replica_equal_to_the_map_sent_in_chunks(site, tmp_path) -> None:
+    replica = tmp_path / "r1.db"
+    with ExitStack() as stack:
+        robot_service(stack, site, "r1", replica)
+        assert same_rows(replica, site)
+        with open_session(client_config(site.endpoint)) as session:
+            belief = LocalizerClient(session, "r1", timeout_s=3.0).belief()
+        assert 0 <= belief["map_age_s"] < 5.0
+
+
+def test_a_place_one_robot_adds_reaches_the_map_and_every_robots_replica(site, tmp_path) -> None:
+    replicas = [tmp_path / "r1.db", tmp_path / "r2.db"]
+    with ExitStack() as stack:
+        services = [robot_service(stack, site, f"r{i + 1}", p) for i, p in enumerate(replicas)]
+        before = site.version()
+        reply = MapClient(site.viewer, "r1").add(panorama("kitchen", 1.0, 1.0), "kitchen", 1.0, 1.0)
+        assert reply["new"] and site.version() == before + 1
+        for replica, service in zip(replicas, services, strict=True):
+            assert wait_for(lambda r=replica: same_rows(r, site), 10.0)
+            assert service.refresher.wait_idle(10.0)
+            loaded = service.runner.localizer
+            assert loaded is not None and reply["place_id"] in loaded.map.table.place_ids
+
+
+def test_offline_the_robot_localizes_from_its_replica_and_catches_up_after(site, tmp_path) -> None:
+    replica = tmp_path / "r1.db"
+    rng = np.random.default_rng(3)
+    with ExitStack() as stack:
+        service = robot_service(stack, site, "r1", replica)
+        site.router_down()
+        with MapDatabase.open(site.db_path) as map_db:  # the map host records meanwhile
+            place = new_place("kitchen", 999)
+            map_db.add_place(place, [make_fingerprint(rng, n=30)])
+        replicator = service.replicator
+        assert replicator is not None
+        belief = service.runner.localize(active=False)
+        assert belief["rooms"]  # the replica is enough to localize
+        assert wait_for(lambda: (replicator.map_age_s() or 0) > 3.0, 8.0)  # not confirmed
+        assert not same_rows(replica, site)
+        site.router_up()
+        assert wait_for(lambda: same_rows(replica, site), 15.0)
+        assert (replicator.map_age_s() or 99) < 3.0
+
+
+def test_the_belief_says_how_old_the_replica_is_while_the_link_is_down(site, tmp_path) -> None:
+    replica = tmp_path / "r1.db"
+    with ExitStack() as stack:
+        robot_service(stack, site, "r1", replica)
+        robot = stack.enter_context(open_session(client_config(site.endpoint)))
+        site.router_down()
+        site.router_up()  # the robot's link went; its local clients see it again before the map
+        localizer = LocalizerClient(robot, "r1", timeout_s=3.0)
+        assert wait_for(lambda: _belief_age(localizer) is not None, 10.0)
+        assert wait_for(lambda: (_belief_age(localizer) or 99) < 2.5, 10.0)  # caught up
+
+
+def _belief_age(localizer: LocalizerClient) -> float | None:
+    try:
+        return localizer.belief().get("map_age_s")
+    except bus.BusError:
+        return None
+
+
+def test_a_replica_of_another_map_is_refused_and_left_as_it_was(site, tmp_path) -> None:
+    replica = tmp_path / "r1.db"
+    other = tmp_path / "other.db"
+    with MapDatabase.open(other) as map_db:
+        map_db.add_place(new_place("hall", 1), [make_fingerprint(np.random.default_rng(1))])
+        write_snapshot(replica, encode_snapshot(read_snapshot(map_db)), str(map_db.map_id()))
+    before = replica.read_bytes()
+    refused = pytest.raises(ReplicaError, match=r"is of map 'map-.*', not 'site-1': refused")
+    with ExitStack() as stack, refused:
+        robot_service(stack, site, "r1", replica)
+    assert replica.read_bytes() == before
+
+
+def test_a_replica_ahead_of_the_map_node_is_refused(site, tmp_path) -> None:
+    replica = tmp_path / "r1.db"
+    with MapDatabase.open(site.db_path, readonly=True) as map_db:
+        snapshot = read_snapshot(map_db)
+    ahead = encode_snapshot(type(snapshot)(snapshot.map_id, snapshot.version + 5, snapshot.rows))
+    write_snapshot(replica, ahead, SITE)
+    with ExitStack() as stack, pytest.raises(ReplicaError, match="ahead of map 'site-1'"):
+        robot_service(stack, site, "r1", replica)
+    assert replica_state(replica).version == snapshot.version + 5  # type: ignore[union-attr]
+
+
+def test_changes_after_an_unknown_version_are_an_error_reply(site) -> None:
+    with pytest.raises(bus.BusReplyError, match=r"site-1/changes: map site-1 has no version 999"):
+        site.client.changes(999)
+
+
+def test_robots_add_through_their_own_keys_or_the_site_keys(site, tmp_path) -> None:
+    with ExitStack() as stack:
+        robot_service(stack, site, "r1", tmp_path / "r1.db")
+        image = encode_png(robot_in("office_a", 1.5, 1.5).capture().image)
+        assert site.client.add(image, "office_a", 1.5, 1.5)["new"]
+        again = MapClient(site.viewer, "r1").add(image, "office_a", 1.5, 1.5)
+        assert not again["new"]  # the same place, through the robot's key
