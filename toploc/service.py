@@ -61,6 +61,9 @@ from toploc.replication import MapReplicator
 from toploc.runner import LocalizationRunner
 
 REFRESH_SETTLE_S = 2.0
+REFRESH_MAX_DELAY_S = 5.0
+"""The longest a change waits for its refresh while others keep coming (several robots adding
+places at once would otherwise never leave ``settle_s`` without a change)."""
 REPLICA_WAIT_S = 10.0
 """How long a site robot's service waits at start for its replica to be current."""
 BUILTIN_MAP_REFUSAL = (
@@ -76,7 +79,8 @@ class MapRefresher:
     """Reload the map at ``db_path`` into ``runner`` after changes settle (a thread of its own).
 
     :meth:`changed` (called for each ``map/changed`` the map node publishes) restarts the
-    ``settle_s`` wait; when it ends the map is re-read (``detector``) and swapped in
+    ``settle_s`` wait (but a change waits ``max_delay_s`` at most, however many follow it);
+    when it ends the map is re-read (``detector``) and swapped in
     (:meth:`LocalizationRunner.replace_map`); with ``recalibrate``, each detector the map
     holds (``detector`` first) is then calibrated and the map swapped in again with its new
     likelihood. A change during the calibration starts another round when it ends. Errors are
@@ -90,11 +94,14 @@ class MapRefresher:
         detector: str = "sift",
         settle_s: float = REFRESH_SETTLE_S,
         recalibrate: bool = True,
+        max_delay_s: float = REFRESH_MAX_DELAY_S,
     ) -> None:
         self.db_path = db_path
         self.runner = runner
         self.detector = detector
         self.settle_s = settle_s
+        self.max_delay_s = max(max_delay_s, settle_s)
+        self._pending_since_s: float | None = None
         self.recalibrate = recalibrate
         self.reloads = 0  # maps swapped in so far (the version the log names)
         self._lock = threading.Lock()
@@ -112,6 +119,8 @@ class MapRefresher:
         with self._lock:
             self._changes += 1
             self._last_change_s = time.monotonic()
+            if self._pending_since_s is None:
+                self._pending_since_s = self._last_change_s
         self._wake.set()
 
     def wait_idle(self, timeout_s: float) -> bool:
@@ -135,8 +144,13 @@ class MapRefresher:
         """Wait for ``settle_s`` without a change; the number of changes then (None: stop)."""
         while True:
             with self._lock:
-                remaining_s = self._last_change_s + self.settle_s - time.monotonic()
+                due_s = self._last_change_s + self.settle_s
+                if self._pending_since_s is not None:
+                    due_s = min(due_s, self._pending_since_s + self.max_delay_s)
+                remaining_s = due_s - time.monotonic()
                 changes = self._changes
+                if remaining_s <= 0:
+                    self._pending_since_s = None  # changes from now on wait anew
             if remaining_s <= 0:
                 return changes
             if self._stop.wait(remaining_s):
