@@ -12,20 +12,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from bus_helpers import free_endpoint, wait_for
+from bus_helpers import free_endpoint, make_belief, wait_for
+from click.testing import CliRunner
 from mapdb_helpers import make_fingerprint, new_place
 from test_map_bus import panorama, robot_in
 
+from localizer.belief import RoomBelief
 from mapdb.database import MapDatabase
-from mapdb.errors import ReplicaError
+from mapdb.errors import MapDatabaseError, ReplicaError
 from mapdb.replica import read_snapshot, replica_state, write_snapshot
 from mapdb.replication import encode_snapshot
 from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.bus.clients.site_map import SiteMapClient
+from toploc.bus.messages import check_belief
 from toploc.bus.png_codec import encode_png
+from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient
-from toploc.nodes.mapdb import MapClient, MapNode
+from toploc.nodes.mapdb import MapClient, MapNode, check_site_map
 from toploc.service import start_service
 
 SITE = "site-1"
@@ -202,3 +206,30 @@ def test_robots_add_through_their_own_keys_or_the_site_keys(site, tmp_path) -> N
         assert site.client.add(image, "office_a", 1.5, 1.5)["new"]
         again = MapClient(site.viewer, "r1").add(image, "office_a", 1.5, 1.5)
         assert not again["new"]  # the same place, through the robot's key
+
+
+def test_a_map_named_once_keeps_its_name(tmp_path) -> None:
+    db_path = tmp_path / "site.db"
+    MapDatabase.open(db_path).close()
+    check_site_map(db_path, "site-1")  # its automatic id gives way to the first name
+    check_site_map(db_path, "site-1")
+    with pytest.raises(MapDatabaseError, match="is site map 'site-1', not 'site-2': serve it"):
+        check_site_map(db_path, "site-2")
+
+
+def test_map_ids_and_flags_that_cannot_be_are_one_line_errors(tmp_path) -> None:
+    db = str(tmp_path / "site.db")
+    bad_id = CliRunner().invoke(main, ["node", "map", "--db", db, "--new-map", "--map-id", "a/b"])
+    assert bad_id.exit_code == 2 and "map id must be a non-empty key chunk" in bad_id.output
+    both = CliRunner().invoke(main, ["serve", "--map-from", "site-1", "--new-map", "--db", db])
+    assert both.exit_code == 2 and "--new-map and --map-from" in both.output
+    robot = CliRunner().invoke(main, ["belief", "--robot-id", "map"])
+    assert robot.exit_code != 0 and "robot id 'map' is taken" in robot.output
+
+
+def test_map_age_is_an_optional_field_of_the_belief() -> None:
+    belief = {**make_belief({"kitchen": 0.7, "office_a": 0.3}), "map_age_s": 1.5}
+    assert check_belief("test", belief)["map_age_s"] == 1.5
+    assert RoomBelief.from_json(belief).rooms == ("kitchen", "office_a")  # one that ignores it
+    with pytest.raises(bus.BusMessageError, match="map_age_s"):
+        check_belief("test", {**belief, "map_age_s": "old"})
