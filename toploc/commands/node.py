@@ -6,7 +6,8 @@ Each command opens its own Zenoh session, enters its node with the ``enter_*`` f
 Ctrl-C (exit status 130) or SIGTERM (0). Each node refuses to start when its role already runs
 for the robot id (``alive/<role>``). The localizer node reloads its map on the map node's
 ``map/changed``; both read the same SQLite file, so they need the same file (one machine, or
-shared storage).
+shared storage). ``node map --map-id`` serves the map to a site's robots, which keep replicas of
+their own (``toploc serve --map-from``, docs/site.md).
 """
 
 from __future__ import annotations
