@@ -246,6 +246,8 @@ def write_snapshot(path: Path | str, data: bytes, map_id: str) -> ReplicaState:
             db.execute("COMMIT")
             if db.execute("PRAGMA integrity_check").fetchone()[0] != "ok":
                 raise BadMapDataError("the written replica fails SQLite's integrity check")
+        for suffix in ("-wal", "-shm", "-journal"):  # a former file's: never the new one's
+            path.with_name(path.name + suffix).unlink(missing_ok=True)
         os.replace(temp, path)
     except BadMapDataError as error:
         raise ReplicaError(f"replica {path}: snapshot refused: {error}", path) from None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Iterator
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,16 +21,18 @@ from test_map_bus import panorama, robot_in
 from localizer.belief import RoomBelief
 from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError, ReplicaError
-from mapdb.replica import read_snapshot, replica_state, write_snapshot
-from mapdb.replication import encode_snapshot
+from mapdb.replica import read_changes, read_snapshot, replica_state, write_snapshot
+from mapdb.replication import encode_changes, encode_snapshot, sha256_hex, split_chunks
 from toploc import bus
 from toploc.bus import BusConfig, open_session
 from toploc.bus.clients.site_map import SiteMapClient
 from toploc.bus.messages import check_belief
 from toploc.bus.png_codec import encode_png
+from toploc.bus.schemas import CHANGES_BATCH, MAP_VERSION, SNAPSHOT_CHUNK
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient, MapNode, check_site_map
+from toploc.replication import MapReplicator
 from toploc.service import start_service
 
 SITE = "site-1"
@@ -233,3 +236,85 @@ def test_map_age_is_an_optional_field_of_the_belief() -> None:
     assert RoomBelief.from_json(belief).rooms == ("kitchen", "office_a")  # one that ignores it
     with pytest.raises(bus.BusMessageError, match="map_age_s"):
         check_belief("test", {**belief, "map_age_s": "old"})
+
+
+class FakeSiteNode:
+    """Raw queryables of site map ``SITE`` on ``session`` answering with what a test gives:
+    ``version`` always ``version``, ``snapshot`` the given replies, ``changes`` the given one."""
+
+    def __init__(self, session: zenoh.Session, version: int) -> None:
+        self.snapshot_replies: list[tuple[bytes, bytes]] = []
+        self.changes_reply: tuple[bytes, bytes] = (b"", b"")
+        head = MAP_VERSION.encode({"map_id": SITE, "version": version})
+        self.entities = [
+            bus.serve(session, bus.site_key(SITE, bus.SITE_VERSION), lambda _p: bus.Reply(head)),
+            bus.serve_replies(
+                session, bus.site_key(SITE, bus.SITE_SNAPSHOT),
+                lambda _p: [bus.Reply(data, att) for data, att in self.snapshot_replies],
+            ),
+            bus.serve(
+                session, bus.site_key(SITE, bus.SITE_CHANGES),
+                lambda _p: bus.Reply(*self.changes_reply),
+            ),
+        ]  # fmt: skip
+
+    def close(self) -> None:
+        bus.undeclare_all(self.entities)
+
+
+def small_map(path: Path, n: int) -> MapDatabase:
+    map_db = MapDatabase.open(path)
+    map_db.set_map_id(SITE)
+    rng = np.random.default_rng(5)
+    for i in range(n):
+        map_db.add_place(new_place("hall", i), [make_fingerprint(rng)])
+    return map_db
+
+
+def test_a_truncated_snapshot_on_the_bus_is_refused_and_no_replica_made(zbus, tmp_path) -> None:
+    with small_map(tmp_path / "site.db", 3) as map_db:
+        data = encode_snapshot(read_snapshot(map_db))
+    node = FakeSiteNode(zbus.server, version=3)
+    chunks = split_chunks(data, 1000)
+    head = {"map_id": SITE, "version": 3, "n_chunks": len(chunks), "total_bytes": len(data),
+            "sha256": sha256_hex(data)}  # fmt: skip
+    node.snapshot_replies = [
+        (chunk, SNAPSHOT_CHUNK.encode({**head, "index": i}))
+        for i, chunk in enumerate(chunks)
+        if i != 1  # one chunk lost on the way
+    ]
+    replicator = MapReplicator(zbus.client, SITE, tmp_path / "replica.db", timeout_s=2.0)
+    try:
+        with pytest.raises(bus.BusMessageError, match=r"snapshot is truncated: 1 of \d+ chunks"):
+            replicator.sync()
+        assert not (tmp_path / "replica.db").exists()
+    finally:
+        replicator.close()
+        node.close()
+
+
+def test_changes_whose_fingerprint_does_not_decode_leave_the_replica_as_it_was(
+    zbus, tmp_path
+) -> None:
+    replica = tmp_path / "replica.db"
+    with small_map(tmp_path / "site.db", 2) as map_db:
+        write_snapshot(replica, encode_snapshot(read_snapshot(map_db)), SITE)
+        map_db.add_place(new_place("hall", 7), [make_fingerprint(np.random.default_rng(9))])
+        changes = read_changes(map_db, 2)
+    place, fingerprint = changes[0].rows.places, changes[0].rows.fingerprints[0]
+    broken = (*fingerprint[:8], fingerprint[8][:-4], *fingerprint[9:])  # 4 bytes short
+    rows = replace(changes[0].rows, places=place, fingerprints=(broken,))
+    node = FakeSiteNode(zbus.server, version=3)
+    node.changes_reply = (
+        encode_changes(SITE, [replace(changes[0], rows=rows)]),
+        CHANGES_BATCH.encode({"map_id": SITE, "version": 3, "more": False}),
+    )
+    before = replica.read_bytes()
+    replicator = MapReplicator(zbus.client, SITE, replica, timeout_s=2.0)
+    try:
+        with pytest.raises(ReplicaError, match=r"changes refused: change 3: .*descriptors blob"):
+            replicator.sync()
+        assert replica.read_bytes() == before and replicator.map_age_s() is None
+    finally:
+        replicator.close()
+        node.close()
