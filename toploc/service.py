@@ -49,6 +49,7 @@ from mapdb.errors import ReplicaError
 from mapdb.loading import open_for_reading
 from toploc import bus
 from toploc.bus import BusConfig, open_session
+from toploc.bus.clients.site_map import subscribe_site_changes
 from toploc.limits import Limits
 from toploc.maps import calibrate_map, load_map
 from toploc.nodes.camera import CameraNode
@@ -379,6 +380,7 @@ def start_service(
     allow_empty: bool = False,
     builtin_map: bool = False,
     map_from: str | None = None,
+    map_id: str | None = None,
 ) -> Iterator[Service]:
     """Serve the map at ``db_path`` for robot ``config.robot_id`` within ``limits``; the
     robot node (when ``robot`` is given) captures from ``camera`` if given, else the robot.
@@ -391,7 +393,9 @@ def start_service(
     session closed (an unclosed session keeps the process alive). The nodes are those of
     ``toploc node robot``, ``localizer`` and ``map`` (the ``enter_*`` functions), on one session.
     ``map_from``: a site map's id; ``db_path`` is then this robot's replica of it (made or
-    brought up to date first, :func:`enter_replica`), kept current after.
+    brought up to date first, :func:`enter_replica`), kept current after. ``map_id``: also
+    serve the map at ``db_path`` as that site map (the map host is a robot too); its localizer
+    refreshes after the site map's writes as after its own.
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
@@ -417,6 +421,13 @@ def start_service(
             stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s,
             builtin_map, forward_to=map_from,
         )  # fmt: skip
+        if map_id is not None:
+            changed = nodes.refresher.changed
+            stack.callback(subscribe_site_changes(session, map_id, lambda _v: changed()).undeclare)
+            enter_map_node(
+                stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s,
+                map_id=map_id,
+            )  # fmt: skip
         yield Service(
             session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing,
             replicator,

@@ -318,3 +318,20 @@ def test_changes_whose_fingerprint_does_not_decode_leave_the_replica_as_it_was(
     finally:
         replicator.close()
         node.close()
+
+
+def test_a_map_host_that_is_a_robot_too_sees_the_places_other_robots_add(site, tmp_path) -> None:
+    host_map = tmp_path / "host.db"
+    shutil.copy(site.db_path, host_map)
+    with MapDatabase.open(host_map) as map_db:
+        map_db.set_map_id("site-2")
+    with ExitStack() as stack:
+        host = stack.enter_context(start_service(
+            host_map, client_config(site.endpoint, "host"), robot_in("kitchen", 2.2, 2.9),
+            refresh_settle_s=0.1, recalibrate=False, map_id="site-2",
+        ))  # fmt: skip
+        other = stack.enter_context(open_session(client_config(site.endpoint, "r9")))
+        reply = SiteMapClient(other, "site-2").add(panorama("kitchen", 1.2, 3.2), "kitchen")
+        assert host.refresher.wait_idle(10.0) and wait_for(
+            lambda: reply["place_id"] in host.runner.localizer.map.table.place_ids, 5.0
+        )

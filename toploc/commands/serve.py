@@ -83,6 +83,15 @@ from toploc.service import MapRefresher, enter_replica, enter_ros2_bridge, start
     "$TOPLOC_HOME/replicas/MAP_ID.db), made from the map's snapshot and kept current; "
     "map/add goes to the site map.",
 )
+@click.option(
+    "--map-id",
+    "map_id",
+    metavar="MAP_ID",
+    default=None,
+    help="Also serve the --db map as site map MAP_ID to other robots (toploc/map/MAP_ID/; they "
+    "run serve --map-from MAP_ID): the map host is a robot too. toploc node map --map-id "
+    "serves it without a robot.",
+)
 @node_options
 @policy_option
 @sim_world_option
@@ -124,6 +133,7 @@ def serve(
     db_path: Path | None,
     new_map: bool,
     map_from: str | None,
+    map_id: str | None,
     robot_id: str,
     listen: tuple[str, ...],
     connect: tuple[str, ...],
@@ -184,13 +194,18 @@ def serve(
             config = replace(config, listen=(ROS2_LISTEN_ENDPOINT,), connect=ros[0].connect)
             click.echo(f"toploc bus: through the ROS router at {', '.join(ros[0].connect)}")
         check_ports_apart(config, ros[0])
+    for option, value in (("--map-from", map_from), ("--map-id", map_id)):
+        if value is None:
+            continue
+        try:
+            bus.check_map_id(value)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint=option) from None
+    if map_id is not None and (map_from is not None or db_path is None):
+        raise click.UsageError("--map-id serves the --db map (not a replica: no --map-from)")
     if map_from is not None:
         if new_map:
             raise click.UsageError("--new-map and --map-from: a replica is made from the site map")
-        try:
-            bus.check_map_id(map_from)
-        except ValueError as error:
-            raise click.BadParameter(str(error), param_hint="--map-from") from None
         replica = db_path or cache_dir() / "replicas" / f"{map_from}.db"
         with ExitStack() as stack:
             capture_from = open_capture_source(stack, source)
@@ -204,7 +219,8 @@ def serve(
     with map_file(db_path, new_map) as db_path, ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
         stop, refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
-                                 robot_spec, camera, limits, source, capture_from, ros)  # fmt: skip
+                                 robot_spec, camera, limits, source, capture_from, ros,
+                                 map_id=map_id)  # fmt: skip
     stopped(stop, refresher)
 
 
@@ -234,9 +250,11 @@ def _serve(
     capture_from: Camera | None,
     ros: tuple[BusConfig, Ros2Settings] | None = None,
     map_from: str | None = None,
+    map_id: str | None = None,
 ) -> tuple[StopSignal, MapRefresher]:
     """Run the service until SIGINT or SIGTERM; the signal and the service's map refresher
-    (``map_from``: ``db_path`` is the robot's replica of that site map)."""
+    (``map_from``: ``db_path`` is the robot's replica of that site map; ``map_id``: it is also
+    served as that site map)."""
     db = db_path or ensure_world_map(sim_world)
     spec = None if no_sim else robot_spec
     try:
@@ -249,7 +267,7 @@ def _serve(
             start_service(
                 db, config, robot, policy, localizer_config, limits, capture_from,
                 allow_empty=db_path is not None, builtin_map=db_path is None,
-                map_from=map_from,
+                map_from=map_from, map_id=map_id,
             ) as service,
             ExitStack() as stack,
         ):  # fmt: skip
@@ -260,6 +278,7 @@ def _serve(
                 enter_ros2_bridge(stack, service.session, config.robot_id, *ros)
                 where += f"; {describe_ros2(*ros)}"
             what = f"a replica of site map {map_from} at {db}" if map_from else str(db)
+            what += f", also as site map {map_id}" if map_id else ""
             click.echo(
                 f"serving {what} as {describe_bus(config)}; robot: {where}; camera: {source}. "
                 "Ctrl-C stops."
