@@ -194,6 +194,12 @@ def test_three_robots_one_map_through_a_router_with_kills(site) -> None:
         with MapDatabase.open(db_path, readonly=True) as map_db:
             held = {place.id for place in map_db.places()}
             version = map_db.map_version()
+            half_places = map_db.db.execute(
+                "SELECT COUNT(*) FROM places p WHERE NOT EXISTS "
+                "(SELECT 1 FROM fingerprints f WHERE f.place_id = p.id)"
+            ).fetchone()[0]
+            logged = map_db.db.execute("SELECT COUNT(*) FROM changes").fetchone()[0]
+        assert half_places == 0 and logged == version  # whole places, one version each write
         assert len(answered) >= 6 and set(answered) <= held  # nothing answered was lost
         for robot_id in ROBOTS:
             replica = processes.root / f"{robot_id}.db"
