@@ -85,13 +85,14 @@ class MapRefresher:
     (:meth:`LocalizationRunner.replace_map`); with ``recalibrate``, each detector the map
     holds (``detector`` first) is then calibrated and the map swapped in again with its new
     likelihood. A change during the calibration starts another round when it ends. Errors are
-    logged; the old map stays.
+    logged; the old map stays. Without a ``runner`` (a site map's node, which localizes
+    nothing) it only re-calibrates.
     """
 
     def __init__(
         self,
         db_path: Path,
-        runner: LocalizationRunner,
+        runner: LocalizationRunner | None,
         detector: str = "sift",
         settle_s: float = REFRESH_SETTLE_S,
         recalibrate: bool = True,
@@ -177,14 +178,15 @@ class MapRefresher:
 
     def _refresh(self) -> None:
         detector = params_from_preset(self.detector).detector
-        loaded = load_map(self.db_path, self.detector)
-        if not self.runner.replace_map(loaded):
-            return
-        self.reloads += 1
-        _log.info(
-            "map %s reloaded (version %d since start): %d places, %d rooms", self.db_path,
-            self.reloads, len(loaded.places), len(loaded.rooms),
-        )  # fmt: skip
+        if self.runner is not None:
+            loaded = load_map(self.db_path, self.detector)
+            if not self.runner.replace_map(loaded):
+                return
+            self.reloads += 1
+            _log.info(
+                "map %s reloaded (version %d since start): %d places, %d rooms", self.db_path,
+                self.reloads, len(loaded.places), len(loaded.rooms),
+            )  # fmt: skip
         if not self.recalibrate:
             return
         with MapDatabase.open(self.db_path, create=False, readonly=True) as map_db:
@@ -198,7 +200,7 @@ class MapRefresher:
                 "map %s: %s likelihood re-calibrated in %.1f s", self.db_path, name,
                 time.monotonic() - start_s,
             )  # fmt: skip
-            if name == detector:
+            if name == detector and self.runner is not None:
                 self.runner.replace_map(load_map(self.db_path, self.detector))
 
 
@@ -322,6 +324,24 @@ def enter_map_node(
             read_only=read_only, map_id=map_id, forward_to=forward_to,
         )
     )  # fmt: skip
+
+
+def enter_site_calibration(
+    stack: ExitStack,
+    session: zenoh.Session,
+    map_id: str,
+    db_path: Path,
+    detector: str = "sift",
+    settle_s: float = REFRESH_SETTLE_S,
+) -> MapRefresher:
+    """Re-calibrate site map ``map_id``'s likelihood at ``db_path`` after its writes settle (as
+    ``toploc serve`` does after its own), on the map host; the new likelihood is a write, so
+    every replica gets it."""
+    refresher = MapRefresher(db_path, None, detector, settle_s, recalibrate=True)
+    stack.callback(refresher.close)
+    changed = refresher.changed
+    stack.callback(subscribe_site_changes(session, map_id, lambda _v: changed()).undeclare)
+    return refresher
 
 
 def enter_replica(

@@ -280,6 +280,19 @@ def test_a_stream_of_changes_is_refreshed_within_the_max_delay(building_map, mon
         refresher.close()
 
 
+def test_a_site_map_node_re_calibrates_after_the_writes_settle(building_map, monkeypatch):
+    from toploc import service as service_module
+
+    calls: list[str] = []
+    monkeypatch.setattr(service_module, "calibrate_map", lambda path, d: calls.append(d))
+    refresher = service_module.MapRefresher(building_map[0], None, "sift", settle_s=0.1)
+    try:
+        refresher.changed()
+        assert refresher.wait_idle(5) and calls == ["sift"] and refresher.reloads == 0
+    finally:
+        refresher.close()
+
+
 def test_the_docs_recording_example_runs(service, tmp_path, monkeypatch, capsys):
     _, endpoint, _ = service
     page = Path(__file__).resolve().parents[2] / "docs" / "robot.md"

@@ -69,7 +69,8 @@ class Processes:
 
     def map_node(self, db_path: Path) -> None:
         self.start("map", ["-m", "toploc", "node", "map", "--db", str(db_path), "--map-id", SITE,
-                           "--robot-id", "maphost", "--connect", self.endpoint])  # fmt: skip
+                           "--robot-id", "maphost", "--connect", self.endpoint,
+                           "--no-calibrate"])  # fmt: skip
 
     def robot(self, robot_id: str) -> None:
         self.start(robot_id, [

@@ -58,6 +58,7 @@ from toploc.service import (
     enter_map_node,
     enter_robot_node,
     enter_ros2_bridge,
+    enter_site_calibration,
 )
 
 Enter = Callable[[ExitStack, zenoh.Session, Limits], str]
@@ -242,12 +243,20 @@ def localizer_node(
     "robots run toploc serve --map-from MAP_ID with replicas of their own; docs/site.md). A "
     "map not yet served under a name takes this one.",
 )
+@click.option(
+    "--calibrate/--no-calibrate",
+    default=True,
+    show_default=True,
+    help="With --map-id: fit the likelihood again after the robots' writes settle (as serve "
+    "does; about 20 s per detector on 100 places), which reaches every replica.",
+)
 @camera_option
 @node_options
 def map_node(
     db_path: Path,
     new_map: bool,
     map_id: str | None,
+    calibrate: bool,
     camera: str,
     robot_id: str,
     listen: tuple[str, ...],
@@ -272,6 +281,8 @@ def map_node(
             return str(db_path)
         enter_map_node(stack, session, robot_id, db_path, limits, localizer_config,
                        map_id=map_id)  # fmt: skip
+        if calibrate:
+            enter_site_calibration(stack, session, map_id, db_path, localizer_config.detector)
         return f"{db_path} as site map {map_id} (toploc/map/{map_id}/**)"
 
     with map_file(db_path, new_map), ExitStack() as stack:
