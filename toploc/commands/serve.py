@@ -173,10 +173,9 @@ def serve(
         robot = "p2os:/dev/ttyUSB0"
         source = "uvc:0"
     """
-    # a site robot (--map-from) that connects to the site router listens nowhere, as a node does
-    config, limits = node_setup(
-        robot_id, listen, connect, mode, zenoh_file, limits_path, map_from is None
-    )
+    # a site's robot or map host that connects to the site router listens nowhere, as a node
+    site = map_from is not None or map_id is not None
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, not site)
     if no_sim and source != "sim":
         raise click.ClickException(
             f"--source {source}: the camera is served by this service's robot node, which "
