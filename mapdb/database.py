@@ -37,6 +37,9 @@ from mapdb.errors import (
 )
 from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary, check_name
 from mapdb.schema import (
+    CHANGES_TABLE,
+    MAP_ID_KEY,
+    MAP_VERSION_KEY,
     META_TABLE,
     MIGRATIONS,
     READ_ONLY_VIEWS,
@@ -270,6 +273,56 @@ class MapDatabase:
                 f"INSERT OR REPLACE INTO {META_TABLE} (key, value) VALUES (?, ?)",
                 [_likelihood_key(detector), json.dumps(dict(calibration), sort_keys=True)],
             )
+            self._log_change("likelihood", {"detector": detector})
+
+    def _meta(self, key: str) -> str | None:
+        row = self.db.execute(f"SELECT value FROM {META_TABLE} WHERE key = ?", [key]).fetchone()
+        return None if row is None else str(row[0])
+
+    @_translated
+    def map_version(self) -> int:
+        """The map's version: the number of the last write in its change log (0: none since
+        the map was made, or migrated to schema version 3)."""
+        return int(self._meta(MAP_VERSION_KEY) or 0)
+
+    @_translated
+    def map_id(self) -> str | None:
+        """The map's own id (what a replica of it checks); None for a map read-only and too old
+        to have one (schema version < 3, not migrated)."""
+        return self._meta(MAP_ID_KEY)
+
+    def set_map_id(self, map_id: str) -> None:
+        """Name the map ``map_id`` (one key chunk, :func:`~mapdb.records.check_name`); replicas
+        made under its former id refuse it afterwards."""
+        self._checked(map_id, "map id")
+        if set("/*$?#") & set(map_id):
+            raise InvalidValueError(
+                f"map id {map_id!r} must not contain '/', '*', '$', '?' or '#' (map {self.path})",
+                self.path,
+            )
+        with self.transaction():
+            self.db.execute(
+                f"INSERT OR REPLACE INTO {META_TABLE} (key, value) VALUES (?, ?)",
+                [MAP_ID_KEY, map_id],
+            )
+
+    def _log_change(self, kind: str, ref: Mapping[str, Any]) -> int:
+        """Give the write under way (call inside :meth:`transaction`) the next map version, in
+        the change log: ``kind`` (place, room, edge, likelihood) and what it wrote; returns it
+        (0 for a map opened with the migrations of an older schema, which has no log)."""
+        if not self.db.table(CHANGES_TABLE).exists():
+            return 0
+        version = int(self._meta(MAP_VERSION_KEY) or 0) + 1
+        self.db.execute(
+            f"INSERT INTO {CHANGES_TABLE} (version, kind, ref_json, created_utc) "
+            "VALUES (?, ?, ?, ?)",
+            [version, kind, json.dumps(dict(ref), sort_keys=True), utc_now_iso()],
+        )
+        self.db.execute(
+            f"INSERT OR REPLACE INTO {META_TABLE} (key, value) VALUES (?, ?)",
+            [MAP_VERSION_KEY, str(version)],
+        )
+        return version
 
     def _room_id(self, name: str) -> int | None:
         row = self.db.execute("SELECT id FROM rooms WHERE name = ?", [name]).fetchone()
@@ -304,7 +357,11 @@ class MapDatabase:
         :class:`InvalidValueError` for a name :func:`~mapdb.records.check_name` refuses."""
         self._checked(name)
         with self.transaction():
-            return self._ensure_room(name)
+            room_id = self._room_id(name)
+            if room_id is None:
+                room_id = self._ensure_room(name)
+                self._log_change("room", {"room_id": room_id})
+            return room_id
 
     @_translated
     def rooms(self) -> list[RoomSummary]:
@@ -337,7 +394,10 @@ class MapDatabase:
                 "INSERT OR IGNORE INTO edges (room_a_id, room_b_id, created_utc) VALUES (?, ?, ?)",
                 [low, high, utc_now_iso()],
             )
-            return cursor.rowcount == 1
+            if cursor.rowcount != 1:
+                return False
+            self._log_change("edge", {"room_a_id": low, "room_b_id": high})
+            return True
 
     @_translated
     def edges(self) -> list[tuple[str, str]]:
@@ -404,6 +464,7 @@ class MapDatabase:
             self.db.table("fingerprints").insert_all(
                 [{**row, "place_id": place_id} for row in rows]
             )
+            self._log_change("place", {"place_id": place_id})
         return place_id
 
     def _place_id_for_image(self, image_sha256: str) -> int | None:

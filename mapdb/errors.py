@@ -88,6 +88,15 @@ class EmptyMapError(MapDatabaseError, ValueError):
     fingerprints); a ``ValueError`` too, as callers caught before."""
 
 
+class ReplicaError(MapDatabaseError, ValueError):
+    """A replica that cannot take a snapshot or changes as they are (another map's, ahead of
+    the map, out of order, data that does not decode); the replica was left as it was."""
+
+
+class UnknownVersionError(MapDatabaseError, ValueError):
+    """Changes asked for after a version the map does not have (ahead of it, or negative)."""
+
+
 class ManifestError(MapDatabaseError):
     """A dataset manifest that is missing, lacks a column, or has a malformed value."""
 

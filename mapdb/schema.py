@@ -20,10 +20,18 @@ Tables (all STRICT; positions in metres and headings in degrees in the frame of 
   bearings_rad, descriptor_dtype, descriptors (blobs, see :mod:`mapdb.codec`), alv_x, alv_y,
   params_json)``, UNIQUE ``(place_id, detector)``, indexed by ``(detector, place_id)`` so one
   detector's rows come in place order without sorting the blobs.
+- ``changes(version PK, kind, ref_json, created_utc)`` (version 3): the map's change log. Each
+  write (a place with its fingerprints, a room, an edge, a likelihood) takes the next version
+  in its own transaction; ``ref_json`` names what it wrote (a place id, a room id, an edge's
+  room ids, a detector), whose rows are read from the tables when a replica asks for the change
+  (:mod:`mapdb.replica`). ``meta`` holds ``map_version`` (the last version; 0: the map as it was
+  before version 3, or empty) and ``map_id`` (the map's own id, a random one when it was
+  migrated: what replicas of it check; :meth:`mapdb.database.MapDatabase.map_id`).
 """
 
 from __future__ import annotations
 
+import secrets
 from collections.abc import Callable, Sequence
 
 import sqlite_utils
@@ -32,6 +40,14 @@ Migration = Callable[[sqlite_utils.Database], None]
 
 META_TABLE = "meta"
 VERSION_KEY = "schema_version"
+MAP_VERSION_KEY = "map_version"
+MAP_ID_KEY = "map_id"
+CHANGES_TABLE = "changes"
+
+
+def new_map_id() -> str:
+    """A fresh map id: ``map-`` and 12 random hex digits (one key chunk)."""
+    return f"map-{secrets.token_hex(6)}"
 
 
 def _v1_initial(db: sqlite_utils.Database) -> None:
@@ -124,11 +140,30 @@ def _v2_camera(db: sqlite_utils.Database) -> None:
     db.execute("ALTER TABLE places ADD COLUMN camera TEXT NOT NULL DEFAULT 'cylinder'")
 
 
-MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera)
+def _v3_versions(db: sqlite_utils.Database) -> None:
+    """Version 3: the change log, the map's version (0: what it held before) and its own id."""
+    db.create_table(
+        CHANGES_TABLE,
+        {"version": int, "kind": str, "ref_json": str, "created_utc": str},
+        pk="version",
+        not_null={"kind", "ref_json", "created_utc"},
+        strict=True,
+    )
+    db.execute(
+        f"INSERT OR IGNORE INTO {META_TABLE} (key, value) VALUES (?, '0'), (?, ?)",
+        [MAP_VERSION_KEY, MAP_ID_KEY, new_map_id()],
+    )
+
+
+MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera, _v3_versions)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 READ_ONLY_VIEWS: dict[Migration, str] = {
     _v2_camera: "CREATE TEMP VIEW places AS SELECT *, 'cylinder' AS camera FROM main.places",
+    _v3_versions: (
+        f"CREATE TEMP VIEW {CHANGES_TABLE} AS SELECT 0 AS version, '' AS kind, '' AS ref_json, "
+        "'' AS created_utc WHERE 0"
+    ),
 }
 """For a migration, the SQL that shows its result to a read-only connection without writing:
 a ``TEMP`` view (kept in memory) named like the table it shadows. A map too old to have one

@@ -261,6 +261,38 @@ def test_the_refresher_waits_for_changes_to_settle_then_reloads_and_recalibrates
         refresher.close()
 
 
+def test_a_stream_of_changes_is_refreshed_within_the_max_delay(building_map, monkeypatch):
+    from toploc import service as service_module
+
+    monkeypatch.setattr(service_module, "load_map", lambda path, detector: FakeMap("grown"))
+    runner = FakeRunner()
+    refresher = service_module.MapRefresher(
+        building_map[0], runner, "sift", settle_s=0.5, recalibrate=False,  # type: ignore[arg-type]
+        max_delay_s=1.0,
+    )  # fmt: skip
+    try:
+        start_s = time.monotonic()
+        while not runner.maps and time.monotonic() - start_s < 3.0:
+            refresher.changed()  # never 0.5 s without a change
+            time.sleep(0.1)
+        assert runner.maps and time.monotonic() - start_s < 1.5
+    finally:
+        refresher.close()
+
+
+def test_a_site_map_node_re_calibrates_after_the_writes_settle(building_map, monkeypatch):
+    from toploc import service as service_module
+
+    calls: list[str] = []
+    monkeypatch.setattr(service_module, "calibrate_map", lambda path, d: calls.append(d))
+    refresher = service_module.MapRefresher(building_map[0], None, "sift", settle_s=0.1)
+    try:
+        refresher.changed()
+        assert refresher.wait_idle(5) and calls == ["sift"] and refresher.reloads == 0
+    finally:
+        refresher.close()
+
+
 def test_the_docs_recording_example_runs(service, tmp_path, monkeypatch, capsys):
     _, endpoint, _ = service
     page = Path(__file__).resolve().parents[2] / "docs" / "robot.md"

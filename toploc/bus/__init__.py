@@ -4,7 +4,8 @@ configuration, request/reply; and the clients of the nodes (:mod:`toploc.bus.cli
 Modules, from the ground up:
 
 - :mod:`~toploc.bus.errors`: the exceptions (every one a :class:`BusError`);
-- :mod:`~toploc.bus.keys`: ``toploc/<robot_id>/<suffix>`` and the contract's key suffixes;
+- :mod:`~toploc.bus.keys`: ``toploc/<robot_id>/<suffix>``, a site map's
+  ``toploc/map/<map_id>/<suffix>``, and the contract's key suffixes;
 - :mod:`~toploc.bus.json_codec`: the JSON envelope ``{schema, kind, ...}`` and field checks;
 - :mod:`~toploc.bus.png_codec`: the panorama as PNG bytes, both ways;
 - :mod:`~toploc.bus.schemas`: every message's kind and fields, declared once;
@@ -72,10 +73,17 @@ from toploc.bus.keys import (
     ROOT,
     SIM_KIDNAP,
     SIM_TRUE_POSE,
+    SITE_CHANGES,
+    SITE_ROOT,
+    SITE_SNAPSHOT,
+    SITE_VERSION,
     alive_key,
+    check_map_id,
     check_robot_id,
     default_robot_id,
     key,
+    site_alive_key,
+    site_key,
 )
 from toploc.bus.request_reply import (
     DEFAULT_TIMEOUT_S,
@@ -84,9 +92,11 @@ from toploc.bus.request_reply import (
     Handler,
     Reply,
     request,
+    request_all,
     request_json,
     serve,
     serve_binary,
+    serve_replies,
 )
 from toploc.bus.session import (
     UNIQUE_CHECK_TIMEOUT_S,
@@ -125,6 +135,10 @@ __all__ = [
     "SCHEMA_VERSION",
     "SIM_KIDNAP",
     "SIM_TRUE_POSE",
+    "SITE_CHANGES",
+    "SITE_ROOT",
+    "SITE_SNAPSHOT",
+    "SITE_VERSION",
     "UNDECLARE_RETRY_S",
     "UNIQUE_CHECK_TIMEOUT_S",
     "BinaryHandler",
@@ -142,6 +156,7 @@ __all__ = [
     "alive_key",
     "bus_config",
     "check_fields",
+    "check_map_id",
     "check_robot_id",
     "client_bus_config",
     "connected",
@@ -158,9 +173,13 @@ __all__ = [
     "open_session",
     "open_when_up",
     "request",
+    "request_all",
     "request_json",
     "serve",
     "serve_binary",
+    "serve_replies",
+    "site_alive_key",
+    "site_key",
     "subscribe",
     "undeclare_all",
 ]

@@ -1,5 +1,10 @@
-"""The key expressions of the bus: every key lives under ``toploc/<robot_id>/`` (:func:`key`);
-the suffixes below are the contract's keys (the bus table in docs/bus.md), one constant each."""
+"""The key expressions of the bus: a robot's keys live under ``toploc/<robot_id>/`` (:func:`key`);
+the suffixes below are the contract's keys (the bus table in docs/bus.md), one constant each.
+
+A site's shared map (issue 22) has keys of its own under ``toploc/map/<map_id>/``
+(:func:`site_key`): the map's ``map/*`` keys without their ``map/`` (``toploc/map/site-1/add``)
+and the replication keys :data:`SITE_VERSION`, :data:`SITE_SNAPSHOT`, :data:`SITE_CHANGES`.
+``map`` is therefore no robot id."""
 
 from __future__ import annotations
 
@@ -25,6 +30,11 @@ MAP_EDGES = "map/edges"
 MAP_ADD = "map/add"
 MAP_CONNECT = "map/connect"
 MAP_CHANGED = "map/changed"
+SITE_ROOT = "map"
+"""``toploc/map/<map_id>/``: a site's shared map (:func:`site_key`); not a robot id."""
+SITE_VERSION = "version"
+SITE_SNAPSHOT = "snapshot"
+SITE_CHANGES = "changes"
 SIM_TRUE_POSE = "sim/true_pose"
 """Simulation only: the simulated base's true pose (:mod:`toploc.nodes.sim_truth`)."""
 SIM_KIDNAP = "sim/kidnap"
@@ -43,7 +53,30 @@ def check_robot_id(robot_id: str) -> str:
             f"robot id must be a non-empty key chunk without '/', '*', '$', '?', '#' or "
             f"surrounding spaces, got {robot_id!r}"
         )
+    if robot_id == SITE_ROOT:
+        raise ValueError(f"robot id {SITE_ROOT!r} is taken: toploc/{SITE_ROOT}/ holds site maps")
     return robot_id
+
+
+def check_map_id(map_id: str) -> str:
+    """Return ``map_id`` if it is one non-empty key chunk (no ``/ * $ ? #``), else raise."""
+    if not map_id or _FORBIDDEN_CHUNK_CHARS & set(map_id) or map_id != map_id.strip():
+        raise ValueError(
+            f"map id must be a non-empty key chunk without '/', '*', '$', '?', '#' or "
+            f"surrounding spaces, got {map_id!r}"
+        )
+    return map_id
+
+
+def site_key(map_id: str, suffix: str) -> str:
+    """The key of site map ``map_id``: ``toploc/map/<map_id>/<suffix>``, where a robot's map key
+    (``map/add``) loses its ``map/``: ``site_key("site-1", MAP_ADD) == "toploc/map/site-1/add"``."""
+    return f"{ROOT}/{SITE_ROOT}/{check_map_id(map_id)}/{suffix.removeprefix('map/')}"
+
+
+def site_alive_key(map_id: str, node: str) -> str:
+    """The liveliness token of site map ``map_id``'s node: ``toploc/map/<map_id>/alive/<node>``."""
+    return site_key(map_id, f"alive/{check_robot_id(node)}")
 
 
 def default_robot_id(hostname: str | None = None) -> str:
@@ -52,7 +85,7 @@ def default_robot_id(hostname: str | None = None) -> str:
     ``"robot"`` if nothing is left. The service and the clients of one machine agree on it."""
     name = (socket.gethostname() if hostname is None else hostname).split(".")[0].lower()
     name = re.sub(r"[/*$?#\s]+", "-", name).strip("-")
-    return name or FALLBACK_ROBOT_ID
+    return name if name and name != SITE_ROOT else FALLBACK_ROBOT_ID
 
 
 def key(robot_id: str, suffix: str) -> str:

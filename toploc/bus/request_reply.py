@@ -88,6 +88,36 @@ def serve_binary(session: zenoh.Session, key_expr: str, handler: BinaryHandler) 
     return _declare(session, key_expr, call, threaded=False)
 
 
+def serve_replies(
+    session: zenoh.Session, key_expr: str, handler: Callable[[bytes | None], list[Reply]]
+) -> zenoh.Queryable:
+    """:func:`serve` for a handler that answers one query with several replies (the chunks of a
+    snapshot), sent in order; the querier collects them with :func:`request_all`. An
+    exception before the first reply is an error reply."""
+
+    def answer(query: zenoh.Query) -> None:
+        with query:
+            try:
+                replies = handler(_bytes(query.payload))
+            except Exception as error:
+                text = str(error)
+                if not isinstance(error, ValueError):
+                    text = f"{type(error).__name__}: {text}"
+                _log.warning("%s: error reply: %s", key_expr, text)
+                try:
+                    query.reply_err(error_payload(text))
+                except zenoh.ZError:
+                    _log.debug("%s: could not send the error reply", key_expr)
+                return
+            try:
+                for reply in replies:
+                    query.reply(key_expr, reply.payload, attachment=reply.attachment)
+            except zenoh.ZError:  # session closing
+                _log.debug("%s: could not send every reply", key_expr)
+
+    return session.declare_queryable(key_expr, zenoh.handlers.Callback(answer, indirect=True))
+
+
 def _declare(
     session: zenoh.Session, key_expr: str, call: Callable[[zenoh.Query], Reply], threaded: bool
 ) -> zenoh.Queryable:
@@ -181,6 +211,38 @@ def request(
             )
         raise BusTimeout(f"{key_expr}: no reply within {timeout_s:g} s ({hint})")
     raise BusReplyError(key_expr, "; ".join(errors), retry_after_s if len(errors) == 1 else None)
+
+
+def request_all(
+    session: zenoh.Session,
+    key_expr: str,
+    payload: bytes | None = None,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+) -> list[zenoh.Sample]:
+    """Every reply to one query of ``key_expr`` (none consolidated away), in arrival order;
+    :class:`BusTimeout` without any, :class:`BusReplyError` for an error reply."""
+    if not timeout_s > 0:
+        raise ValueError(f"timeout_s must be positive, got {timeout_s!r}")
+    try:
+        replies = list(
+            session.get(
+                key_expr, payload=payload, timeout=timeout_s,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
+        )  # fmt: skip
+    except zenoh.ZError as error:
+        raise BusError(f"{key_expr}: query failed: {error}") from error
+    samples = [reply.ok for reply in replies if reply.ok is not None]
+    errors = [
+        _error_reply(key_expr, reply.err.payload.to_bytes())[0]
+        for reply in replies
+        if reply.ok is None and reply.err is not None
+    ]
+    if errors and errors != ["Timeout"]:
+        raise BusReplyError(key_expr, "; ".join(errors), None)
+    if not samples:
+        raise BusTimeout(f"{key_expr}: no reply within {timeout_s:g} s (is the node running?)")
+    return samples
 
 
 def request_json(

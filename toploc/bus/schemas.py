@@ -69,9 +69,13 @@ CAPTURE = Schema(
 
 # --- the localizer: toploc.nodes.localizer --------------------------------------------------
 
-BELIEF = Schema("belief", optional={"stale": bool, "age_s": (float, NULL)})
+BELIEF = Schema(
+    "belief", optional={"stale": bool, "age_s": (float, NULL), "map_age_s": (float, NULL)}
+)
 """``localizer/belief``: :meth:`localizer.belief.RoomBelief.to_json`'s fields, checked by
-:func:`toploc.bus.messages.check_belief`; a stale belief adds the optional fields."""
+:func:`toploc.bus.messages.check_belief`; a stale belief adds ``stale`` and ``age_s``, a
+localizer on a replica of a site map ``map_age_s`` (seconds since the replica last confirmed
+it was the map's current version; null: never)."""
 LOCALIZE = Schema("localize", optional={"active": bool, "timeout_s": float})
 """``localizer/localize`` request (optional: no payload at all is a passive localize)."""
 RESET = Schema("reset", optional={"prior": dict})
@@ -103,8 +107,32 @@ CONNECT = Schema("connect", {"room_a": str, "room_b": str})
 """``map/connect`` request."""
 CONNECTED = Schema("connected", {"room_a": str, "room_b": str, "added": bool})
 """``map/connect`` reply (a client reads ``added`` only)."""
-CHANGED = Schema("changed", {"what": str}, {"stamp": float})
-"""``map/changed`` publication after each write; ``what``: ``add`` or ``connect``."""
+CHANGED = Schema("changed", {"what": str}, {"stamp": float, "version": int, "map_id": str})
+"""``map/changed`` publication after each write; ``what``: ``add`` or ``connect``; the map's
+version after it and its id (a site map's ``changed`` always carries them)."""
+
+# --- a site's shared map: toploc.nodes.mapdb (site keys), toploc.replication -----------------
+
+MAP_VERSION = Schema("map_version", {"map_id": str, "version": int}, {"stamp": float})
+"""``version`` reply: the map's id and current version."""
+SNAPSHOT_CHUNK = Schema(
+    "snapshot_chunk",
+    {
+        "map_id": str,
+        "version": int,
+        "index": int,
+        "n_chunks": int,
+        "total_bytes": int,
+        "sha256": str,
+    },
+)
+"""The JSON attachment of each reply to ``snapshot`` (one reply per chunk; the payload is the
+chunk's bytes of :func:`mapdb.replication.encode_snapshot`, ``sha256`` that of all of them)."""
+CHANGES_QUERY = Schema("changes", {"after": int})
+"""``changes`` request: the changes after version ``after``."""
+CHANGES_BATCH = Schema("changes_batch", {"map_id": str, "version": int, "more": bool})
+"""The JSON attachment of the ``changes`` reply (payload: :func:`mapdb.replication.
+encode_changes`); ``version``: the map's current one, ``more``: ask again after the last."""
 
 # --- homing: toploc.nodes.homing ------------------------------------------------------------
 

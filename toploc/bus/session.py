@@ -46,19 +46,24 @@ def ensure_unique_node(
     robot_id: str,
     node: str,
     timeout_s: float = UNIQUE_CHECK_TIMEOUT_S,
+    token_key: str | None = None,
 ) -> None:
-    """Raise :class:`BusIdInUse` if the liveliness token of ``node`` for ``robot_id`` is already
-    on the bus (waits at most ``timeout_s`` seconds; see the module docstring for the race).
-    Call it before the node declares anything."""
-    token_key = alive_key(robot_id, node)
+    """Raise :class:`BusIdInUse` if the liveliness token of ``node`` for ``robot_id`` (or
+    ``token_key``, a site map's) is already on the bus (waits at most ``timeout_s`` seconds; see
+    the module docstring for the race). Call it before the node declares anything."""
+    token_key = token_key or alive_key(robot_id, node)
     try:
         replies = list(session.liveliness().get(token_key, timeout=timeout_s))
     except zenoh.ZError as error:
         raise BusError(f"{token_key}: liveliness query failed: {error}") from error
     if any(reply.ok is not None for reply in replies):
+        what, option = (
+            (f"robot id {robot_id!r}", "--robot-id")
+            if token_key == alive_key(robot_id, node)
+            else ("this map id", "--map-id")
+        )
         raise BusIdInUse(
-            f"robot id {robot_id!r} already has a {node} node on the bus ({token_key}); "
-            "choose another --robot-id"
+            f"{what} already has a {node} node on the bus ({token_key}); choose another {option}"
         )
 
 

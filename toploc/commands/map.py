@@ -424,11 +424,17 @@ def connect_command(room_a: str, room_b: str, db_path: Path) -> None:
 @map_db_option
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def info_command(db_path: Path, as_json: bool) -> None:
-    """Rooms, places per room, fingerprints per detector, edges and file size."""
+    """Rooms, places per room, fingerprints per detector, edges and file size; the map's id and
+    version (what a site's replicas follow)."""
     with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
         info = map_db.info()
         room_of = {place.id: place.room for place in map_db.places()}
-    click.echo(json.dumps(info.to_json(), indent=2) if as_json else format_info(info, room_of))
+        identity = {"map_id": map_db.map_id(), "map_version": map_db.map_version()}
+    if as_json:
+        click.echo(json.dumps({**info.to_json(), **identity}, indent=2))
+        return
+    click.echo(format_info(info, room_of))
+    click.echo(f"map id {identity['map_id']}, version {identity['map_version']}")
 
 
 @map_group.command("export")

@@ -6,7 +6,8 @@ Each command opens its own Zenoh session, enters its node with the ``enter_*`` f
 Ctrl-C (exit status 130) or SIGTERM (0). Each node refuses to start when its role already runs
 for the robot id (``alive/<role>``). The localizer node reloads its map on the map node's
 ``map/changed``; both read the same SQLite file, so they need the same file (one machine, or
-shared storage).
+shared storage). ``node map --map-id`` serves the map to a site's robots, which keep replicas of
+their own (``toploc serve --map-from``, docs/site.md).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from localizer.localizer import LocalizerConfig
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError
 from robot.p2os_base import P2osError
+from toploc import bus
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import client_bus_config
 from toploc.commands.bus_client import client_options
@@ -56,6 +58,7 @@ from toploc.service import (
     enter_map_node,
     enter_robot_node,
     enter_ros2_bridge,
+    enter_site_calibration,
 )
 
 Enter = Callable[[ExitStack, zenoh.Session, Limits], str]
@@ -231,11 +234,29 @@ def localizer_node(
 @long_running
 @db_option(SHARED_MAP)
 @click.option("--new-map", is_flag=True, help="Create the --db file empty if it does not exist.")
+@click.option(
+    "--map-id",
+    "map_id",
+    metavar="MAP_ID",
+    default=None,
+    help="Serve the map as site map MAP_ID for every robot on the bus (keys toploc/map/MAP_ID/; "
+    "robots run toploc serve --map-from MAP_ID with replicas of their own; docs/site.md). A "
+    "map not yet served under a name takes this one.",
+)
+@click.option(
+    "--calibrate/--no-calibrate",
+    default=True,
+    show_default=True,
+    help="With --map-id: fit the likelihood again after the robots' writes settle (as serve "
+    "does; about 20 s per detector on 100 places), which reaches every replica.",
+)
 @camera_option
 @node_options
 def map_node(
     db_path: Path,
     new_map: bool,
+    map_id: str | None,
+    calibrate: bool,
     camera: str,
     robot_id: str,
     listen: tuple[str, ...],
@@ -248,9 +269,21 @@ def map_node(
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
 
+    if map_id is not None:
+        try:
+            bus.check_map_id(map_id)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint="--map-id") from None
+
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
         enter_map_node(stack, session, robot_id, db_path, limits, localizer_config)
-        return str(db_path)
+        if map_id is None:
+            return str(db_path)
+        enter_map_node(stack, session, robot_id, db_path, limits, localizer_config,
+                       map_id=map_id)  # fmt: skip
+        if calibrate:
+            enter_site_calibration(stack, session, map_id, db_path, localizer_config.detector)
+        return f"{db_path} as site map {map_id} (toploc/map/{map_id}/**)"
 
     with map_file(db_path, new_map), ExitStack() as stack:
         stop = _run(config, limits, "map node: ", enter, stack)

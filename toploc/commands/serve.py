@@ -4,7 +4,10 @@ robot as Zenoh nodes on one session; ``toploc node ROLE`` runs one node per proc
 Exit status: 130 after Ctrl-C (SIGINT), 0 after SIGTERM (a service manager's stop), 1 with
 ``Error: ...`` when it cannot start; a map that ``--new-map`` created is then deleted again.
 Without ``--db`` it serves toploc's built-in world map, which ``map/add`` and ``map/connect``
-refuse to write (record your own with ``--db FILE --new-map``).
+refuse to write (record your own with ``--db FILE --new-map``). With ``--map-from MAP_ID`` the
+robot is one of a site's (docs/site.md): it localizes on its own replica (``--db``, default
+``$TOPLOC_HOME/replicas/MAP_ID.db``) of the site map a ``toploc node map --map-id MAP_ID``
+serves, and its ``map/add`` goes to that map.
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ from localizer.localizer import LocalizerConfig
 from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.p2os_base import P2osError
-from toploc.bus import BusConfig, BusError
+from toploc import bus
+from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import ROS2_LISTEN_ENDPOINT
 from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
@@ -48,11 +52,11 @@ from toploc.commands.ros2_options import (
     ros2_setup,
 )
 from toploc.limits import Limits
-from toploc.maps import ensure_world_map
+from toploc.maps import cache_dir, ensure_world_map
 from toploc.nodes.ros2 import Ros2Settings
 from toploc.nodes.sim_truth import subscribe_true_pose
 from toploc.robots import ROBOT_SPECS, open_served_robot
-from toploc.service import MapRefresher, enter_ros2_bridge, start_service
+from toploc.service import MapRefresher, enter_replica, enter_ros2_bridge, start_service
 
 
 @click.command("serve")
@@ -68,6 +72,25 @@ from toploc.service import MapRefresher, enter_ros2_bridge, start_service
     "--new-map",
     is_flag=True,
     help="Create the --db file as an empty map if it does not exist.",
+)
+@click.option(
+    "--map-from",
+    "map_from",
+    metavar="MAP_ID",
+    default=None,
+    help="Localize on a replica of site map MAP_ID (served by toploc node map --map-id MAP_ID "
+    "anywhere on the bus; docs/site.md): --db is this robot's replica (default "
+    "$TOPLOC_HOME/replicas/MAP_ID.db), made from the map's snapshot and kept current; "
+    "map/add goes to the site map.",
+)
+@click.option(
+    "--map-id",
+    "map_id",
+    metavar="MAP_ID",
+    default=None,
+    help="Also serve the --db map as site map MAP_ID to other robots (toploc/map/MAP_ID/; they "
+    "run serve --map-from MAP_ID): the map host is a robot too. toploc node map --map-id "
+    "serves it without a robot.",
 )
 @node_options
 @policy_option
@@ -109,6 +132,8 @@ from toploc.service import MapRefresher, enter_ros2_bridge, start_service
 def serve(
     db_path: Path | None,
     new_map: bool,
+    map_from: str | None,
+    map_id: str | None,
     robot_id: str,
     listen: tuple[str, ...],
     connect: tuple[str, ...],
@@ -148,7 +173,9 @@ def serve(
         robot = "p2os:/dev/ttyUSB0"
         source = "uvc:0"
     """
-    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path)
+    # a site's robot or map host that connects to the site router listens nowhere, as a node
+    site = map_from is not None or map_id is not None
+    config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, not site)
     if no_sim and source != "sim":
         raise click.ClickException(
             f"--source {source}: the camera is served by this service's robot node, which "
@@ -166,11 +193,45 @@ def serve(
             config = replace(config, listen=(ROS2_LISTEN_ENDPOINT,), connect=ros[0].connect)
             click.echo(f"toploc bus: through the ROS router at {', '.join(ros[0].connect)}")
         check_ports_apart(config, ros[0])
+    for option, value in (("--map-from", map_from), ("--map-id", map_id)):
+        if value is None:
+            continue
+        try:
+            bus.check_map_id(value)
+        except ValueError as error:
+            raise click.BadParameter(str(error), param_hint=option) from None
+    if map_id is not None and (map_from is not None or db_path is None):
+        raise click.UsageError("--map-id serves the --db map (not a replica: no --map-from)")
+    if map_from is not None:
+        if new_map:
+            raise click.UsageError("--new-map and --map-from: a replica is made from the site map")
+        replica = db_path or cache_dir() / "replicas" / f"{map_from}.db"
+        with ExitStack() as stack:
+            capture_from = open_capture_source(stack, source)
+            if not replica.exists():
+                _first_replica(config, map_from, replica)
+            stop, refresher = _serve(replica, config, policy, sim_world, sim_room, seed, no_sim,
+                                     robot_spec, camera, limits, source, capture_from, ros,
+                                     map_from)  # fmt: skip
+        stopped(stop, refresher)
+        return
     with map_file(db_path, new_map) as db_path, ExitStack() as stack:
         capture_from = open_capture_source(stack, source)  # first: fails before a map is made
         stop, refresher = _serve(db_path, config, policy, sim_world, sim_room, seed, no_sim,
-                                 robot_spec, camera, limits, source, capture_from, ros)  # fmt: skip
+                                 robot_spec, camera, limits, source, capture_from, ros,
+                                 map_id=map_id)  # fmt: skip
     stopped(stop, refresher)
+
+
+def _first_replica(config: BusConfig, map_id: str, replica: Path) -> None:
+    """Make the robot's first replica of site map ``map_id`` (its panorama size is the sim
+    camera's); one line if the map node cannot be reached."""
+    click.echo(f"making replica {replica} of site map {map_id} ...")
+    try:
+        with open_session(config) as session, ExitStack() as stack:
+            enter_replica(stack, session, map_id, replica)
+    except (BusError, MapDatabaseError) as error:
+        raise click.ClickException(str(error)) from error
 
 
 def _serve(
@@ -187,8 +248,12 @@ def _serve(
     source: str,
     capture_from: Camera | None,
     ros: tuple[BusConfig, Ros2Settings] | None = None,
+    map_from: str | None = None,
+    map_id: str | None = None,
 ) -> tuple[StopSignal, MapRefresher]:
-    """Run the service until SIGINT or SIGTERM; the signal and the service's map refresher."""
+    """Run the service until SIGINT or SIGTERM; the signal and the service's map refresher
+    (``map_from``: ``db_path`` is the robot's replica of that site map; ``map_id``: it is also
+    served as that site map)."""
     db = db_path or ensure_world_map(sim_world)
     spec = None if no_sim else robot_spec
     try:
@@ -201,6 +266,7 @@ def _serve(
             start_service(
                 db, config, robot, policy, localizer_config, limits, capture_from,
                 allow_empty=db_path is not None, builtin_map=db_path is None,
+                map_from=map_from, map_id=map_id,
             ) as service,
             ExitStack() as stack,
         ):  # fmt: skip
@@ -210,8 +276,10 @@ def _serve(
             if ros is not None:
                 enter_ros2_bridge(stack, service.session, config.robot_id, *ros)
                 where += f"; {describe_ros2(*ros)}"
+            what = f"a replica of site map {map_from} at {db}" if map_from else str(db)
+            what += f", also as site map {map_id}" if map_id else ""
             click.echo(
-                f"serving {db} as {describe_bus(config)}; robot: {where}; camera: {source}. "
+                f"serving {what} as {describe_bus(config)}; robot: {where}; camera: {source}. "
                 "Ctrl-C stops."
             )
             stop.wait_for_signal()

@@ -23,7 +23,9 @@ belief it answers or publishes carries ``"stale": true`` and ``"age_s"`` (second
 belief's ``stamp``; the last belief is still served, nothing updates it), and the stale belief
 is published at once; when the token comes back a fresh (unmarked) belief is published. Both
 fields are optional: :func:`~toploc.bus.messages.check_belief` keeps them, and a reader that does
-not know them (``RoomBelief.from_json``) ignores them.
+not know them (``RoomBelief.from_json``) ignores them. A localizer on a replica of a site map
+(``map_age`` given) adds ``"map_age_s"`` to each belief in the same way: seconds since the
+replica last confirmed it was the map's current version (null: never).
 
 Threading: each queryable runs its handler on a Python thread of its own (zenoh-python's
 indirect callbacks), so a long ``localize(active=True)`` does not delay ``belief`` or
@@ -38,7 +40,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
 import zenoh
@@ -92,9 +94,11 @@ class LocalizerNode(Node):
         robot_id: str,
         service: LocalizationService,
         limits: Limits | None = None,
+        map_age: Callable[[], float | None] | None = None,
     ) -> None:
         super().__init__(session, robot_id, NODE_NAME)
         self.service = service
+        self.map_age = map_age
         self.limits = limits or Limits()
         self._publish_lock = threading.Lock()
         self._last_published: dict[str, Any] | None = None
@@ -137,7 +141,11 @@ class LocalizerNode(Node):
             _log.warning("could not publish the belief: %s", error)
 
     def _marked(self, belief: Mapping[str, Any]) -> dict[str, Any]:
-        return mark_stale(belief) if self.robot_gone else dict(belief)
+        marked = mark_stale(belief) if self.robot_gone else dict(belief)
+        if self.map_age is not None:
+            age_s = self.map_age()
+            marked["map_age_s"] = None if age_s is None else round(age_s, 3)
+        return marked
 
     def publish(self, belief: Mapping[str, Any]) -> bool:
         """Publish ``belief`` on ``localizer/belief`` unless it equals the last one published.

@@ -45,6 +45,8 @@ from localizer.panorama_io import decode_grey
 from mapdb.database import MapDatabase
 from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
 from mapdb.records import NewPlace, Place, check_name
+from mapdb.replica import MAX_CHANGES, read_changes, read_snapshot
+from mapdb.replication import CHUNK_BYTES, encode_changes, encode_snapshot, sha256_hex, split_chunks
 from toploc import bus
 from toploc.bus.clients.mapdb import ADD_TIMEOUT_S, MapClient, subscribe_changes
 from toploc.bus.png_codec import check_png
@@ -52,12 +54,16 @@ from toploc.bus.schemas import (
     ADD,
     ADDED,
     CHANGED,
+    CHANGES_BATCH,
+    CHANGES_QUERY,
     CONNECT,
     CONNECTED,
     EDGES,
+    MAP_VERSION,
     PLACES,
     PLACES_QUERY,
     ROOMS,
+    SNAPSHOT_CHUNK,
 )
 from toploc.limits import Limits
 from toploc.nodes.node import Node
@@ -102,6 +108,10 @@ class MapNode(Node):
     ``refresh_after_s``: told in the ``map/add`` reply (when the localizer uses the place).
     ``read_only``: why the node refuses every write (``map/add``, ``map/connect``) with that
     error reply, e.g. toploc's built-in map; None: it writes.
+    ``map_id``: serve the site map of this id (its keys and the replication keys; the file's
+    own id must be it, :func:`check_site_map`). ``forward_to``: the site map id whose map node
+    takes this node's writes (``db_path`` is then a replica of it). ``chunk_bytes``: the most
+    bytes of a snapshot in one reply.
     """
 
     def __init__(
@@ -114,9 +124,14 @@ class MapNode(Node):
         detectors: tuple[str, ...] = ("sift",),
         refresh_after_s: float | None = None,
         read_only: str | None = None,
+        map_id: str | None = None,
+        forward_to: str | None = None,
+        chunk_bytes: int = CHUNK_BYTES,
     ) -> None:
-        super().__init__(session, robot_id, NODE_NAME)
+        super().__init__(session, robot_id, NODE_NAME, map_id)
         self.read_only = read_only
+        self.forward_to = forward_to
+        self.chunk_bytes = chunk_bytes
         self.db_path = Path(db_path)
         self.limits = limits or Limits()
         self.camera = camera
@@ -131,8 +146,15 @@ class MapNode(Node):
             bus.serve(session, k(bus.MAP_EDGES), self._on_edges),
             bus.serve_binary(session, k(bus.MAP_ADD), self._on_add),
             bus.serve(session, k(bus.MAP_CONNECT), self._on_connect),
-            session.liveliness().declare_token(bus.alive_key(robot_id, NODE_NAME)),
         ]
+        if map_id is not None:
+            check_site_map(self.db_path, map_id)
+            self.entities += [
+                bus.serve(session, k(bus.SITE_VERSION), self._on_version),
+                bus.serve_replies(session, k(bus.SITE_SNAPSHOT), self._on_snapshot),
+                bus.serve(session, k(bus.SITE_CHANGES), self._on_changes),
+            ]
+        self.entities.append(session.liveliness().declare_token(self.alive_key()))
 
     def _open(self) -> MapDatabase:
         return MapDatabase.open(self.db_path, readonly=True)
@@ -175,8 +197,49 @@ class MapNode(Node):
                 f"{where}: the map cannot be written, nothing was added ({error})"
             ) from None
 
-    def _changed(self, what: str) -> None:
-        self._changes.put(CHANGED.encode({"what": what, "stamp": time.time()}))
+    def _changed(self, what: str, map_db: MapDatabase) -> None:
+        message: dict[str, Any] = {"what": what, "stamp": time.time()}
+        map_id = map_db.map_id()
+        if map_id is not None:
+            message.update(version=map_db.map_version(), map_id=map_id)
+        self._changes.put(CHANGED.encode(message))
+
+    def _forward(self, suffix: str, payload: bytes | None, attachment: bytes | None) -> bus.Reply:
+        """Pass a write on to the site map's node (``forward_to``); its reply."""
+        assert self.forward_to is not None
+        key_expr = bus.site_key(self.forward_to, suffix)
+        sample = bus.request(self.session, key_expr, payload, ADD_TIMEOUT_S, attachment)
+        return bus.Reply(sample.payload.to_bytes())
+
+    def _on_version(self, _payload: bytes | None) -> bus.Reply:
+        with self._open() as map_db:
+            fields = {"map_id": map_db.map_id(), "version": map_db.map_version()}
+        return bus.Reply(MAP_VERSION.encode({**fields, "stamp": time.time()}))
+
+    def _on_snapshot(self, _payload: bytes | None) -> list[bus.Reply]:
+        with self._open() as map_db:
+            snapshot = read_snapshot(map_db)
+        data = encode_snapshot(snapshot)
+        chunks = split_chunks(data, self.chunk_bytes)
+        head = {"map_id": snapshot.map_id, "version": snapshot.version, "n_chunks": len(chunks),
+                "total_bytes": len(data), "sha256": sha256_hex(data)}  # fmt: skip
+        _log.info("snapshot of version %d: %d bytes in %d chunk(s)", snapshot.version,
+                  len(data), len(chunks))  # fmt: skip
+        return [
+            bus.Reply(chunk, SNAPSHOT_CHUNK.encode({**head, "index": i}))
+            for i, chunk in enumerate(chunks)
+        ]
+
+    def _on_changes(self, payload: bytes | None) -> bus.Reply:
+        where = self.key(bus.SITE_CHANGES)
+        request = CHANGES_QUERY.decode(where, payload, True, self.limits.max_request_bytes)
+        with self._open() as map_db:
+            map_id = str(map_db.map_id())
+            changes = read_changes(map_db, request["after"], MAX_CHANGES)
+            version = map_db.map_version()
+        last = changes[-1].version if changes else request["after"]
+        head = {"map_id": map_id, "version": version, "more": last < version}
+        return bus.Reply(encode_changes(map_id, changes), CHANGES_BATCH.encode(head))
 
     def _decode_metadata(self, where: str, attachment: bytes | None) -> dict[str, Any]:
         """The checked metadata of a ``map/add`` request (the attachment)."""
@@ -202,6 +265,8 @@ class MapNode(Node):
 
         where = self.key(bus.MAP_ADD)
         meta = self._decode_metadata(where, attachment)
+        if self.forward_to is not None:
+            return self._forward(bus.MAP_ADD, payload, attachment)
         data = check_png(where, payload, self.limits.max_image_bytes)
         image = decode_grey(data, where, self.limits.max_image_pixels)
         sha = hashlib.sha256(data).hexdigest()
@@ -222,8 +287,8 @@ class MapNode(Node):
             except DuplicatePlaceError as error:
                 place_id, new = error.place_id, False
                 _check_same_place(where, map_db.place(place_id), place)
-        if new:
-            self._changed("add")
+            if new:
+                self._changed("add", map_db)
         _log.info(
             "map add: place %d in room %s (%s; features %s)", place_id, place.room,
             "new" if new else "already in the map",
@@ -253,6 +318,8 @@ class MapNode(Node):
             raise bus.BusMessageError(
                 f"{where}: cannot connect room {request['room_a']!r} to itself"
             )
+        if self.forward_to is not None:
+            return self._forward(bus.MAP_CONNECT, payload, None)
         with self._open_writable(where) as map_db:
             try:
                 added = map_db.connect_rooms(request["room_a"], request["room_b"])
@@ -262,8 +329,33 @@ class MapNode(Node):
                     f"{where}: field {field!r}: unknown room {error.room!r} (add a place in it "
                     "first)"
                 ) from None
+            if added:
+                self._changed("connect", map_db)
         if added:
-            self._changed("connect")
             _log.info("map connect: %s -- %s", request["room_a"], request["room_b"])
         reply = {"room_a": request["room_a"], "room_b": request["room_b"], "added": added}
         return bus.Reply(CONNECTED.encode(reply))
+
+
+def check_site_map(db_path: Path, map_id: str) -> None:
+    """Make sure the map at ``db_path`` is site map ``map_id``: a map whose id is still the
+    automatic one (``map-`` and 12 hex digits, never served under a name) is named ``map_id``;
+    a map named otherwise is a :class:`MapDatabaseError` (its replicas know it by that name)."""
+    with MapDatabase.open(db_path, create=False) as map_db:
+        held = map_db.map_id()
+        if held == map_id:
+            return
+        if held is not None and _is_automatic_id(held):
+            map_db.set_map_id(map_id)
+            _log.info("map %s named %s (its id was %s)", db_path, map_id, held)
+            return
+    raise MapDatabaseError(
+        f"map {db_path} is site map {held!r}, not {map_id!r}: serve it with --map-id {held} "
+        "(replicas know it by that id)",
+        db_path,
+    )
+
+
+def _is_automatic_id(map_id: str) -> bool:
+    digits = map_id.removeprefix("map-")
+    return len(digits) == 12 and all(c in "0123456789abcdef" for c in digits)
