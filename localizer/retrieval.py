@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import Protocol
+from typing import Any, Protocol
 
 import cv2
 import faiss
@@ -301,7 +301,8 @@ class CompactPlaceIndex:
         )
         # Polysemous training (codes ordered for Hamming filtering, which voting does not use)
         # took 30 times as long as the rest: 87 s for 3,000 descriptors here.
-        faiss.downcast_index(faiss.extract_index_ivf(index)).do_polysemous_training = False
+        ivf_pq: Any = faiss.downcast_index(faiss.extract_index_ivf(index))
+        ivf_pq.do_polysemous_training = False
         index.train(sample)
         return cls(index, np.zeros(0, dtype=np.int64), params)
 
