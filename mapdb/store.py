@@ -15,6 +15,7 @@ by place in batches (an index is built without holding them all at once).
 
 from __future__ import annotations
 
+import hashlib
 import sqlite3
 import threading
 from collections import OrderedDict
@@ -54,9 +55,9 @@ _DESCRIPTORS = (
 class PlaceCatalog:
     """The compact metadata of one detector's places, place ``i`` of each field, by place id.
 
-    ``fingerprint_ids`` (m,) the fingerprints' row ids; ``image_keys`` (m,) int64 the first 15
-    hex digits of each place's image SHA-256 (with the ids, what identifies the places an index
-    was built over); ``keypoint_counts`` (m,) int64; ``alv_xy`` (m, 2); ``image_sizes_px``
+    ``fingerprint_ids`` (m,) the fingerprints' row ids; ``image_keys`` (m,) int64 a 64-bit
+    digest of each place's image SHA-256 (with the ids, what identifies the places an index was
+    built over); ``keypoint_counts`` (m,) int64; ``alv_xy`` (m, 2); ``image_sizes_px``
     (m, 2) ``(width, height)``; ``params`` each place's extraction parameters (shared).
     """
 
@@ -89,7 +90,7 @@ class PlaceCatalog:
             detector=detector,
             place_ids=np.array(columns[1], dtype=np.int64),
             fingerprint_ids=np.array(columns[0], dtype=np.int64),
-            image_keys=np.array([int(h[:15], 16) for h in columns[10]], dtype=np.int64),
+            image_keys=np.array([_image_key(h) for h in columns[10]], dtype=np.int64),
             rooms=tuple(rooms.setdefault(name, name) for name in columns[2]),
             keypoint_counts=np.array(columns[5], dtype=np.int64),
             descriptor_dim=dims.pop() if dims else 0,
@@ -97,6 +98,11 @@ class PlaceCatalog:
             image_sizes_px=np.array([columns[3], columns[4]], dtype=np.int64).T.reshape(-1, 2),
             params=tuple(params_of(text) for text in columns[9]),
         )
+
+
+def _image_key(image_sha256: str) -> int:
+    digest = hashlib.blake2b(image_sha256.encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "little", signed=True)
 
 
 class SqlitePlaceStore:

@@ -5,7 +5,7 @@ A map read from disk (:class:`mapdb.store.SqlitePlaceStore`) is shortlisted by a
 :class:`localizer.retrieval.CompactPlaceIndex`. Training its quantisers and encoding every
 descriptor takes minutes at 10,000 places, so the index is kept in ``<map>.<detector>-index.npz``
 beside the map with the places it was built over: each place's id, fingerprint row id and the
-first hex digits of its image hash (what the map already has; no schema change). On load:
+a digest of its image hash (what the map already has; no schema change). On load:
 
 - the file's places are the map's first places, in order: the index is read, and the places
   added since (``map add``, the map node's ``map/add``, then the service's refresh) are encoded
