@@ -25,9 +25,14 @@ under ``--cache-dir`` (default ``$TOPLOC_HOME/cache/big-maps``).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
+import json
 import math
 import os
+import resource
+import sqlite3
+import subprocess
 import sys
 import time
 from collections.abc import Iterator, Sequence
@@ -40,6 +45,7 @@ from localizer.features import extract_preset
 from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, NewPlace
+from mapdb.store import SqlitePlaceStore
 from mapdb.workers import spawn_process_pool
 from robot.conditions import get_condition, world_under
 from robot.photo_library import load_photo, photo_room, photo_room_names
@@ -48,6 +54,8 @@ from robot.render import PanoramaCamera, render_panorama
 from robot.scene import build_scene
 from robot.world import capture_places
 from robot.worlds import make_world
+from toploc.evaluation.localization import OUTCOMES
+from toploc.map_index import index_path
 
 TARGET = ("building", 0, 1.0)
 SEED_WORLDS = ("building", "lab", "corridor", "house")
@@ -203,18 +211,251 @@ def default_cache_dir() -> Path:
     return base / "cache" / "big-maps"
 
 
+def sized_map(big: Path, n_places: int) -> Path:
+    """The map of the first ``n_places`` places of ``big`` (a copy beside it, made once by SQL;
+    ``big`` itself when it has exactly that many)."""
+    with MapDatabase.open(big, create=False, readonly=True) as map_db:
+        held = map_db.info().n_places
+    if held == n_places:
+        return big
+    if held < n_places:
+        raise ValueError(f"{big} holds {held} places, {n_places} asked")
+    path = big.with_name(f"{big.stem}_{n_places}.db")
+    if path.exists():
+        return path
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.unlink(missing_ok=True)
+    MapDatabase.open(tmp).close()  # the schema
+    conn = sqlite3.connect(tmp)
+    conn.execute("ATTACH DATABASE ? AS big", (str(big),))
+    ids = "(SELECT id FROM big.places ORDER BY id LIMIT ?)"
+    conn.execute(
+        f"INSERT INTO rooms SELECT * FROM big.rooms WHERE id IN "
+        f"(SELECT room_id FROM big.places WHERE id IN {ids})", (n_places,)
+    )  # fmt: skip
+    conn.execute(f"INSERT INTO places SELECT * FROM big.places WHERE id IN {ids}", (n_places,))
+    conn.execute(
+        f"INSERT INTO fingerprints SELECT * FROM big.fingerprints WHERE place_id IN {ids}",
+        (n_places,),
+    )
+    conn.commit()
+    conn.close()
+    tmp.rename(path)
+    return path
+
+
+def query_images(cache_dir: Path, n: int, condition: str, workers: int) -> tuple[list[Shot], Path]:
+    """``n`` query shots (the target under ``condition`` on a 0.7 m grid, spread evenly) and
+    the file of their grey panoramas (rendered once)."""
+    all_shots = world_shots(*TARGET[:2], 0.7, condition)
+    pick = np.unique(np.round(np.linspace(0, len(all_shots) - 1, n)).astype(int))
+    chosen = [all_shots[i] for i in pick]
+    path = cache_dir / f"queries_{condition}_{len(chosen)}.npz"
+    if not path.exists():
+        print(f"rendering {len(chosen)} queries under {condition!r} ...", flush=True)
+        if workers > 1:
+            with spawn_process_pool(workers) as pool:
+                images = list(pool.map(render_image, chosen, chunksize=4))
+        else:
+            images = [render_image(s) for s in chosen]
+        np.savez_compressed(path, images=np.stack(images))
+    return chosen, path
+
+
+def render_image(shot: Shot) -> np.ndarray:
+    """The grey panorama of a target-world shot."""
+    condition = get_condition(shot.condition)
+    world = make_world(shot.world, shot.seed)
+    key = (shot.world, shot.seed, shot.condition)
+    if key not in _SCENE:
+        _SCENE.clear()
+        _SCENE[key] = build_scene(world_under(world, condition, shot.seed))
+    pose = world.building_pose(
+        shot.room, Pose2D(shot.x_m, shot.y_m, math.radians(shot.heading_deg))
+    )
+    noise_seed = (shot.seed, int(shot.x_m * 1000), int(shot.y_m * 1000), len(shot.room))
+    return render_panorama(_SCENE[key], pose, CAMERA, condition, seed=noise_seed, grey=True)
+
+
+def rss_mib() -> float:
+    """Current resident set size of this process in MiB (Linux)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def peak_rss_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def run_one(args: argparse.Namespace) -> dict:
+    """One map size and storage, in this (fresh) process: build the index if it is not cached,
+    load the map, calibrate it, then run every query; the figures as a dict."""
+    from dataclasses import replace
+
+    from localizer.calibration import calibrate
+    from localizer.evidence import place_evidence
+    from localizer.localizer import Localizer, LocalizerConfig
+    from toploc.evaluation.localization import QueryOutcome, outcome_of
+    from toploc.map_index import compact_index
+    from toploc.maps import load_map
+
+    db_path, storage = Path(args.db), args.storage
+    result: dict = {"places": args.size, "storage": storage, "load": os.getloadavg()[0]}
+    if storage == "build":  # in a process of its own, so that its garbage is not measured
+        t0 = time.perf_counter()
+        _, report = compact_index(SqlitePlaceStore.open(db_path, "sift"))
+        return {"index_build_s": time.perf_counter() - t0, "index_action": report.action,
+                "build_peak_rss_mib": peak_rss_mib()}  # fmt: skip
+    base = rss_mib()
+    t0 = time.perf_counter()
+    loaded = load_map(db_path, storage=storage)
+    result["load_s"] = time.perf_counter() - t0
+    result["resident_mib"] = rss_mib() - base
+    result["kib_per_place"] = result["resident_mib"] * 1024 / args.size
+    result["index_build_s"] = None  # FLANN: built within the load; compact: by "build"
+    t0 = time.perf_counter()
+    model, _ = calibrate(loaded)
+    result["calibration_s"] = time.perf_counter() - t0
+    loaded = replace(loaded, likelihood=model)
+    localizer = Localizer(loaded, LocalizerConfig())
+    shots = json.loads(Path(args.shots).read_text())
+    images = np.load(args.images)["images"]
+    brute_file = Path(args.brute)
+    brute = json.loads(brute_file.read_text()) if brute_file.exists() else {}
+    rows = []
+    for k, (shot, image) in enumerate(zip(shots, images, strict=True)):
+        localizer.reset()
+        t0 = time.perf_counter()
+        fingerprint = localizer.extract(image)
+        t1 = time.perf_counter()
+        observation = localizer.observe_fingerprint(fingerprint, (t1 - t0) * 1e3)
+        belief = localizer.update(observation)
+        t2 = time.perf_counter()
+        top = belief.rooms[int(np.argmax(belief.probabilities))]
+        query = QueryOutcome(
+            f"q{k}", shot["room"], top, max(belief.probabilities), str(belief.state),
+            observation.timing_ms,
+        )  # fmt: skip
+        outcome = outcome_of(query, loaded.rooms)
+        best = observation.evidence.best
+        row = {
+            "extract_ms": (t1 - t0) * 1e3,
+            "total_ms": (t2 - t0) * 1e3,
+            "retrieval_ms": observation.timing_ms["retrieval"],
+            "verification_ms": observation.timing_ms["verification"],
+            "top1": best is not None and best.inliers > 0 and best.room == shot["room"],
+            "outcome": outcome,
+            "shortlist": [e.place_id for e in observation.evidence.places],
+        }
+        if storage == "memory" and k < args.brute_queries:
+            evidence = place_evidence(fingerprint, loaded.table, localizer.evidence_params)
+            brute[str(k)] = evidence.best.place_id if evidence.best else None
+        if str(k) in brute:
+            row["brute_in_shortlist"] = brute[str(k)] in row["shortlist"]
+        rows.append(row)
+    if storage == "memory":
+        brute_file.write_text(json.dumps(brute))
+    result["queries"] = rows
+    result["peak_rss_mib"] = peak_rss_mib()
+    return result
+
+
+def summarise(r: dict) -> str:
+    rows = r["queries"]
+    ratio = [q["total_ms"] / q["extract_ms"] for q in rows]
+    outcomes = {o: sum(q["outcome"] == o for q in rows) for o in OUTCOMES}
+    recall = [q["brute_in_shortlist"] for q in rows if "brute_in_shortlist" in q]
+    build = "-" if r["index_build_s"] is None else f"{r['index_build_s']:.0f}"
+    return (
+        f"| {r['places']} | {r['storage']} | {sum(q['top1'] for q in rows)}/{len(rows)} "
+        f"| {' / '.join(str(outcomes[o]) for o in OUTCOMES)} "
+        f"| {f'{sum(recall)}/{len(recall)}' if recall else '-'} "
+        f"| {np.median([q['extract_ms'] for q in rows]):.0f} "
+        f"| {np.median([q['retrieval_ms'] for q in rows]):.0f} "
+        f"| {np.median([q['total_ms'] for q in rows]):.0f} "
+        f"| {np.median(ratio):.2f}x | {np.percentile(ratio, 95):.2f}x "
+        f"| {r['kib_per_place']:.1f} | {r['peak_rss_mib']:.0f} "
+        f"({r.get('build_peak_rss_mib', 0):.0f}) | {r['load_s']:.1f} | {build} "
+        f"| {r['calibration_s']:.0f} | {r['load']:.1f} |"
+    )
+
+
+HEADER = (
+    "| places | storage | top-1 room | right loc. / right amb. / wrong loc. / wrong amb. / lost "
+    "| brute winner in shortlist | extraction ms | retrieval ms | query ms (median) "
+    "| query / extraction median | p95 | resident KiB per place | peak RSS MiB (build) | load s "
+    "| index build s | calibration s | load avg |\n" + "|---" * 16 + "|"
+)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     parser.add_argument("--render-only", action="store_true", help="fill the cache and stop")
     parser.add_argument("--sizes", default="1000,10000", help="comma-separated map sizes")
+    parser.add_argument(
+        "--memory-sizes", default="1000", help="sizes also run in memory (FLANN), as today"
+    )
+    parser.add_argument("--queries", type=int, default=40, help="queries per map")
+    parser.add_argument(
+        "--brute-queries", type=int, default=20, help="queries also matched brute force (memory)"
+    )
+    parser.add_argument("--condition", default="dim_noisy", help="the queries' condition")
     parser.add_argument("--workers", type=int, default=2, help="render processes")
     parser.add_argument("--cache-dir", type=Path, default=None)
+    parser.add_argument(
+        "--keep-index", action="store_true", help="reuse an index file left by an earlier run"
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write the results as JSON")
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    for name in ("--db", "--storage", "--shots", "--images", "--brute", "--result"):
+        parser.add_argument(name, help=argparse.SUPPRESS)
+    parser.add_argument("--size", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        Path(args.result).write_text(json.dumps(run_one(args)))
+        return
     cache_dir = args.cache_dir or default_cache_dir()
     sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
-    fill_cache(cache_path(cache_dir), max(sizes), args.workers)
+    memory_sizes = [int(s) for s in args.memory_sizes.split(",") if s.strip()]
+    big = cache_path(cache_dir)
+    fill_cache(big, max(sizes), args.workers)
     if args.render_only:
         return
+    shots, images = query_images(cache_dir, args.queries, args.condition, args.workers)
+    shots_file = cache_dir / "query_shots.json"
+    shots_file.write_text(json.dumps([dataclasses.asdict(s) for s in shots]))
+    results = []
+    for size in sizes:
+        db = sized_map(big, size)
+        brute = cache_dir / f"brute_{size}_{args.condition}_{len(shots)}.json"
+        for storage in (["memory"] if size in memory_sizes else []) + ["disk"]:
+            print(f"map of {size} places, {storage} ...", flush=True)
+            out = cache_dir / f"result_{size}_{storage}.json"
+            if storage == "disk" and not args.keep_index:
+                index_path(db, "sift").unlink(missing_ok=True)  # time the build
+            command = [
+                sys.executable, __file__, "--child", "--db", str(db), "--storage", storage,
+                "--size", str(size), "--shots", str(shots_file), "--images", str(images),
+                "--brute", str(brute), "--brute-queries", str(args.brute_queries),
+                "--result", str(out),
+            ]  # fmt: skip
+            built = {}
+            if storage == "disk":
+                subprocess.run([*command[:6], "build", *command[7:]], check=True)
+                built = json.loads(out.read_text())
+            subprocess.run(command, check=True)
+            results.append(json.loads(out.read_text()) | built)
+            print(HEADER.splitlines()[0])
+            print(summarise(results[-1]), flush=True)
+    print(f"\nqueries: building seed 0 under {args.condition!r}, {len(shots)} per map, "
+          f"SIFT on {CAMERA.width_px}x{CAMERA.height_px}\n")  # fmt: skip
+    print(HEADER)
+    for r in results:
+        print(summarise(r))
+    if args.out:
+        args.out.write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":
