@@ -100,6 +100,17 @@ def compact_index(
     return index, IndexReport(action, added, why, time.perf_counter() - t0)
 
 
+def refresh_index_files(db_path: Path) -> list[IndexReport]:
+    """Bring every index file beside the map at ``db_path`` up to date with the map (after
+    ``map add``: the new places encoded and added); a map without one is left without."""
+    reports = []
+    suffix = "-index.npz"
+    for path in sorted(db_path.parent.glob(f"{db_path.name}.*{suffix}")):
+        detector = path.name[len(db_path.name) + 1 : -len(suffix)]
+        reports.append(compact_index(SqlitePlaceStore.open(db_path, detector))[1])
+    return reports
+
+
 def build_index(store: SqlitePlaceStore, params: CompactParams | None = None) -> CompactPlaceIndex:
     """Train a compact index on a sample streamed from ``store`` and add every place, in
     batches (never every descriptor at once)."""

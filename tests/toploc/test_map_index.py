@@ -18,7 +18,7 @@ from localizer.localizer import Localizer, LocalizerConfig
 from mapdb.database import MapDatabase
 from mapdb.dataset import read_manifest
 from mapdb.store import SqlitePlaceStore
-from toploc.map_index import compact_index, index_path
+from toploc.map_index import compact_index, index_path, refresh_index_files
 from toploc.maps import load_map
 
 
@@ -64,6 +64,15 @@ def test_adding_a_place_extends_the_index_without_rebuilding_it(big_map: Path) -
     assert after.shortlist(own_view(store, 30), 1)[0] == 30
     _, report = compact_index(SqlitePlaceStore.open(big_map, "sift"))
     assert report.action == "read"  # the extended index was written back
+
+
+def test_refreshing_after_map_add_encodes_the_new_place_into_the_file(big_map: Path) -> None:
+    assert refresh_index_files(big_map) == []  # no index file: nothing to do
+    compact_index(SqlitePlaceStore.open(big_map, "sift"))
+    random_map(big_map, 2, seed=4, first=30)
+    (report,) = refresh_index_files(big_map)
+    assert (report.action, report.added) == ("extended", 2)
+    assert compact_index(SqlitePlaceStore.open(big_map, "sift"))[1].action == "read"
 
 
 def test_a_damaged_index_file_is_said_and_built_again(big_map: Path, caplog) -> None:
