@@ -20,6 +20,7 @@ under ``--cache-dir`` (default ``$TOPLOC_HOME/cache/big-maps``).
 
     python benchmarks/bench_big_maps.py --render-only          # fill the cache (long)
     python benchmarks/bench_big_maps.py [--sizes 1000,10000] [--queries 40]
+    python benchmarks/bench_big_maps.py --sizes 10000 --probes 16,8,4   # after a run
 """
 
 from __future__ import annotations
@@ -375,6 +376,43 @@ def run_one(args: argparse.Namespace) -> dict:
     return result
 
 
+def probe_sweep(db: Path, shots: list[Shot], images: Path, probes: Sequence[int]) -> None:
+    """Retrieval time, evidence time, top-1 (best place) and shortlist overlap with the first
+    setting, per probe count, on the map at ``db`` (its index file, not calibrated)."""
+    from localizer.evidence import place_evidence
+    from localizer.localizer import Localizer, LocalizerConfig
+    from localizer.retrieval import CompactParams, CompactPlaceIndex
+    from toploc.maps import load_map
+
+    store = SqlitePlaceStore.open(db, "sift")
+    with np.load(index_path(db, "sift")) as data:
+        codes, counts = data["index"], data["keypoint_counts"]
+    localizer = Localizer(load_map(db, storage="disk"), LocalizerConfig())
+    fingerprints = [localizer.extract(image) for image in np.load(images)["images"]]
+    first: list[set[int]] = []
+    for n in probes:
+        index = CompactPlaceIndex.from_bytes(codes, counts, CompactParams(probes=n))
+        retrieval_ms, evidence_ms, right, lists = [], [], 0, []
+        for fingerprint, shot in zip(fingerprints, shots, strict=True):
+            t0 = time.perf_counter()
+            lists.append(set(index.shortlist(fingerprint.descriptors, 10).tolist()))
+            t1 = time.perf_counter()
+            evidence = place_evidence(fingerprint, store, localizer.evidence_params, index)
+            t2 = time.perf_counter()
+            retrieval_ms.append((t1 - t0) * 1e3)
+            evidence_ms.append((t2 - t1) * 1e3)
+            best = evidence.best
+            right += best is not None and best.inliers > 0 and best.room == shot.room
+        first = first or lists
+        overlap = np.mean([len(a & b) / 10 for a, b in zip(lists, first, strict=True)])
+        print(
+            f"probes {n}: retrieval median {np.median(retrieval_ms):.0f} ms, evidence median "
+            f"{np.median(evidence_ms):.0f} ms, top-1 {right}/{len(shots)}, shortlist overlap "
+            f"with {probes[0]} probes {overlap:.2f}",
+            flush=True,
+        )
+
+
 def summarise(r: dict) -> str:
     rows = r["queries"]
     ratio = [q["total_ms"] / q["extract_ms"] for q in rows]
@@ -423,6 +461,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--keep-index", action="store_true", help="reuse an index file left by an earlier run"
     )
+    parser.add_argument(
+        "--probes", default=None, help="instead: sweep these probe counts (e.g. 16,8,4) on the "
+        "largest size's index file, uncalibrated"
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     for name in ("--db", "--storage", "--shots", "--images", "--brute", "--result"):
@@ -442,6 +484,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     shots, images = query_images(cache_dir, args.queries, args.condition, args.workers)
     shots_file = cache_dir / "query_shots.json"
     shots_file.write_text(json.dumps([dataclasses.asdict(s) for s in shots]))
+    if args.probes:
+        probe_sweep(
+            sized_map(big, max(sizes)), shots, images, [int(p) for p in args.probes.split(",")]
+        )
+        return
     results = []
     for size in sizes:
         db = sized_map(big, size)

@@ -219,8 +219,8 @@ class CompactParams:
     ``lists``: inverted lists of the coarse quantiser (None: from the training sample, see
     :func:`lists_for`); ``subquantizers`` x 8 bits: bytes per code (16 here: a SIFT descriptor
     in 16 bytes); ``probes``: lists searched per query descriptor (8: at 10,000 places of
-    ``bench_big_maps.py`` 197 ms a query against 351 ms with 16, the same top-1, 95 % of the
-    shortlist the same; 4: 115 ms, 89 %); ``neighbours`` and
+    ``bench_big_maps.py --probes`` 194 ms a query against 355 ms with 16, the same top-1, 95 %
+    of the shortlist the same; 4: 113 ms, 89 %); ``neighbours`` and
     ``max_distance_ratio`` as :class:`IndexParams`' (on the codes' approximate distances);
     ``train_per_list``: training descriptors per list (faiss's k-means wants at least 39);
     ``threads``: Python threads a query's search is split over (:meth:`CompactPlaceIndex.search`;
