@@ -80,9 +80,7 @@ def counts(
     """Own-room best, best other room, and every other room's best ``count``, per query."""
     own, best_other, others = [], [], []
     for fingerprint, room, exclude in queries:
-        evidence = place_evidence(
-            fingerprint, loaded.table, params, loaded.index, exclude, loaded.rays
-        )
+        evidence = place_evidence(fingerprint, loaded.table, params, loaded.index, exclude)
         best = room_inliers(evidence.places, loaded.rooms, count=count)
         per_room = dict(zip(loaded.rooms, best, strict=True))
         rest = [v for r, v in per_room.items() if r != room]

@@ -105,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         place_of = table.keypoint_place_index[np.maximum(neighbours, 0)]
         for place in (int(p) for p in shortlist):
             voted_rows[place] = np.flatnonzero((place_of == place).any(axis=1))
-            place_rays = loaded.rays[table.rows(place)]
+            place_rays = table.fingerprint(place).rays()
             own = table.rooms[place] == entry.room
             for name, match in methods.items():
                 t0 = time.perf_counter()

@@ -184,7 +184,8 @@ def time_map(
         best = observation.evidence.best
         right += int(best is not None and best.inliers > 0 and best.room == room)
     return RunResult(
-        label, len(loaded.places), len(loaded.table.descriptors), width, totals, stages, right,
+        label, len(loaded.places), int(loaded.table.keypoint_counts.sum()), width, totals,
+        stages, right,
         load_rss, rss_mib("VmHWM"),
     )  # fmt: skip
 

@@ -96,7 +96,6 @@ def leave_one_out(
             params,
             loaded.index,
             exclude=int(place_id),
-            table_rays=loaded.rays,
         )
         counts = room_inliers(evidence.places, loaded.rooms, count=count)
         per_room = dict(zip(loaded.rooms, (float(c) for c in counts), strict=True))
@@ -117,7 +116,7 @@ def counterpart_pairs(
         twins.setdefault(b, set()).add(a)
     found: set[tuple[int, int]] = set()
     for query in queries:
-        keypoints = loaded.table.fingerprint(query.table_index).n
+        keypoints = int(loaded.table.keypoint_counts[query.table_index])
         own_id = int(loaded.table.place_ids[query.table_index])
         for item in query.evidence:
             if item.room in twins.get(query.room, ()) and is_counterpart(item.inliers, keypoints):

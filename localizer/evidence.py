@@ -12,9 +12,9 @@ count: a room seen through a door fills a narrow arc of the panorama however man
 gives, the room the robot stands in surrounds it. The calibrated likelihood reads the count
 weighted by that coverage (``PlaceEvidence.spread_inliers``).
 
-Each stored place is read on its own cylinder (the table keeps every place's image size and
-extraction parameters); its keypoints' rays are computed once per map
-(:meth:`mapdb.records.FingerprintTable.rays`) and passed in as ``table_rays``.
+The places come from a :class:`mapdb.records.PlaceStore`: stacked in memory, or read from the
+map on demand (only the candidates' fingerprints are fetched, in one read). Each stored place is
+read on its own camera (its fingerprint's), its keypoints' rays computed when it is verified.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from localizer.matching import DEFAULT_RATIO, match_descriptors
-from localizer.retrieval import PlaceIndex
+from localizer.retrieval import Shortlister
 from localizer.verification import MIN_CORRESPONDENCES, VerificationParams, verify
-from mapdb.records import Fingerprint, FingerprintTable
+from mapdb.records import Fingerprint, PlaceStore
 
 MOTIONS: tuple[str, ...] = ("auto", "general", "planar")
 
@@ -150,12 +150,12 @@ class QueryEvidence:
         return self.places[0] if self.places else None
 
 
-def _check_inputs(query: Fingerprint, table: FingerprintTable) -> None:
+def _check_inputs(query: Fingerprint, table: PlaceStore) -> None:
     if query.detector != table.detector:
         raise ValueError(
             f"query fingerprint is {query.detector!r} but the table holds {table.detector!r}"
         )
-    dim = table.descriptors.shape[1] if table.descriptors.ndim == 2 else 0
+    dim = table.descriptor_dim
     if len(table.place_ids) and query.n and query.descriptors.shape[1] != dim:
         raise ValueError(
             f"query descriptors have {query.descriptors.shape[1]} values, the table's {dim}"
@@ -165,20 +165,18 @@ def _check_inputs(query: Fingerprint, table: FingerprintTable) -> None:
 def evaluate_place(
     query: Fingerprint,
     query_rays: np.ndarray,
-    table: FingerprintTable,
-    table_rays: np.ndarray,
-    place_index: int,
+    place: Fingerprint,
+    place_id: int,
+    room: str,
     params: EvidenceParams,
 ) -> PlaceEvidence:
-    """Match and verify the query against the place at ``place_index`` of ``table``, whose
-    stacked rows have the unit rays ``table_rays`` (N, 3)."""
-    rows = table.rows(place_index)
-    pairs = match_descriptors(query.descriptors, table.descriptors[rows], params.ratio)
-    place_id, room = int(table.place_ids[place_index]), table.rooms[place_index]
+    """Match and verify the query (its unit rays ``query_rays``) against the stored
+    fingerprint ``place`` of place ``place_id`` in ``room``."""
+    pairs = match_descriptors(query.descriptors, place.descriptors, params.ratio)
     if len(pairs) < params.min_matches:
         empty = np.zeros((0, 2), dtype=np.int64)
         return PlaceEvidence(place_id, room, len(pairs), 0, float("nan"), empty, 0.0)
-    result = verify(query_rays, table_rays[rows], pairs, params.verification())
+    result = verify(query_rays, place.rays(), pairs, params.verification())
     coverage = azimuth_coverage(query_rays[result.inlier_pairs[:, 0]])
     return PlaceEvidence(
         place_id, room, len(pairs), result.inliers, result.yaw_rad, result.inlier_pairs, coverage
@@ -187,11 +185,10 @@ def evaluate_place(
 
 def place_evidence(
     query: Fingerprint,
-    table: FingerprintTable,
+    table: PlaceStore,
     params: EvidenceParams | None = None,
-    index: PlaceIndex | None = None,
+    index: Shortlister | None = None,
     exclude: int | None = None,
-    table_rays: np.ndarray | None = None,
 ) -> QueryEvidence:
     """Evidence of ``query`` for the places of ``table`` (one detector).
 
@@ -199,17 +196,11 @@ def place_evidence(
     ``params.shortlist`` best places are verified (the others are left out of the result).
     An empty map gives no places; an empty query gives every candidate 0 matches.
     ``exclude`` (a place id) leaves that place out of retrieval and verification (leave-one-out
-    evaluation of a map's own places). ``table_rays``: the table's rays if already computed
-    (a loaded map keeps them), else they are computed here.
+    evaluation of a map's own places). The candidates' fingerprints are read from ``table``
+    in one call (for a store on disk: one read), before matching.
     """
     params = params or EvidenceParams()
     _check_inputs(query, table)
-    if table_rays is None:
-        table_rays = table.rays()
-    elif table_rays.shape != (len(table.bearings_rad), 3):
-        raise ValueError(
-            f"table_rays must have shape ({len(table.bearings_rad)}, 3), got {table_rays.shape}"
-        )
     t0 = time.perf_counter()
     left_out = None
     if exclude is not None:
@@ -223,15 +214,20 @@ def place_evidence(
         candidates = index.shortlist(query.descriptors, params.shortlist, left_out)
     t1 = time.perf_counter()
     query_rays = query.rays()
+    stored = table.fingerprints(candidates) if index is not None else None
 
-    def evaluate(i: np.integer) -> PlaceEvidence:
-        return evaluate_place(query, query_rays, table, table_rays, int(i), params)
+    def evaluate(k: int) -> PlaceEvidence:
+        i = int(candidates[k])
+        place = stored[k] if stored is not None else table.fingerprint(i)
+        return evaluate_place(
+            query, query_rays, place, int(table.place_ids[i]), table.rooms[i], params
+        )
 
     if params.threads == 1 or len(candidates) < 2:
-        evidence = [evaluate(i) for i in candidates]
+        evidence = [evaluate(k) for k in range(len(candidates))]
     else:
         with ThreadPoolExecutor(min(params.threads, len(candidates))) as pool:
-            evidence = list(pool.map(evaluate, candidates))
+            evidence = list(pool.map(evaluate, range(len(candidates))))
     t2 = time.perf_counter()
     evidence.sort(key=lambda e: (-e.inliers, -e.matches, e.place_id))
     timing = {"retrieval": (t1 - t0) * 1e3 if index is not None else 0.0}

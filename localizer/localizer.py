@@ -31,8 +31,8 @@ from localizer.lookalikes import (
     twin_counts,
 )
 from localizer.policy import PlaceSimilarity
-from localizer.retrieval import PlaceIndex
-from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place
+from localizer.retrieval import PlaceIndex, Shortlister
+from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place, PlaceStore
 
 # From this many places (twice the default shortlist) the index pays: verifying all 30 places of
 # a 30-place map took 159 ms per query against 55 ms for the shortlist of 10 at 100 places
@@ -71,35 +71,52 @@ class LocalizerConfig:
 
 @dataclass(frozen=True, eq=False)
 class LoadedMap:
-    """One detector's view of the map, ready to localize against: the stacked fingerprints and
-    every stored keypoint's unit ray (computed once here), the places, rooms, room graph, the
-    retrieval index and the likelihood calibrated on the map (None: not calibrated). Built from
-    a :class:`mapdb.records.MapSnapshot`; holds no database."""
+    """One detector's view of the map, ready to localize against: its places' fingerprints (a
+    :class:`~mapdb.records.PlaceStore`: stacked in memory, or read from the map on demand), the
+    places, rooms, room graph, the retrieval index and the likelihood calibrated on the map
+    (None: not calibrated). Built from a :class:`mapdb.records.MapSnapshot`; holds no open
+    database."""
 
     path: Path
-    table: FingerprintTable
-    rays: np.ndarray
+    table: PlaceStore
     places: tuple[Place, ...]
     rooms: tuple[str, ...]
     edges: tuple[tuple[str, str], ...]
-    index: PlaceIndex | None
+    index: Shortlister | None
     likelihood: RatioLikelihood | None = None
 
     @classmethod
-    def from_snapshot(cls, snapshot: MapSnapshot, use_index: bool | None = None) -> LoadedMap:
-        """Compute the rays and (``use_index``; ``None``: from ``INDEX_MIN_PLACES`` places) the
-        retrieval index of ``snapshot``."""
+    def from_snapshot(
+        cls,
+        snapshot: MapSnapshot,
+        use_index: bool | None = None,
+        index: Shortlister | None = None,
+    ) -> LoadedMap:
+        """The loaded map of ``snapshot`` with ``index`` (one over its places in order, e.g. a
+        :class:`~localizer.retrieval.CompactPlaceIndex` for a store on disk), else (with
+        ``use_index``; ``None``: from ``INDEX_MIN_PLACES`` places) a FLANN
+        :class:`~localizer.retrieval.PlaceIndex` built over a table in memory."""
         table = snapshot.table
-        if use_index is None:
-            use_index = len(table.place_ids) >= INDEX_MIN_PLACES
+        if index is not None and index.n_places != len(table.place_ids):
+            raise ValueError(
+                f"the index holds {index.n_places} places, the map {snapshot.path} "
+                f"{len(table.place_ids)}"
+            )
+        if index is None:
+            if use_index is None:
+                use_index = len(table.place_ids) >= INDEX_MIN_PLACES
+            if use_index and not isinstance(table, FingerprintTable):
+                raise ValueError("a map read from disk needs its compact index")
+            if use_index:
+                assert isinstance(table, FingerprintTable)
+                index = PlaceIndex.build(table)
         return cls(
             path=snapshot.path,
             table=table,
-            rays=table.rays(),
             places=snapshot.places,
             rooms=snapshot.rooms,
             edges=snapshot.edges,
-            index=PlaceIndex.build(table) if use_index else None,
+            index=index,
             likelihood=(
                 None
                 if snapshot.likelihood is None
@@ -125,6 +142,10 @@ class LoadedMap:
     def fingerprint(self, place_id: int) -> Fingerprint:
         """The stored fingerprint of place ``place_id``; ``KeyError`` naming it if absent."""
         return self.table.fingerprint(self.table_index(place_id))
+
+    def keypoints(self, place_id: int) -> int:
+        """How many keypoints place ``place_id`` has (read from memory); ``KeyError`` if absent."""
+        return int(self.table.keypoint_counts[self.table_index(place_id)])
 
     def place(self, place_id: int) -> Place:
         """The place with id ``place_id``; ``KeyError`` naming it if it is not in the map."""
@@ -235,7 +256,6 @@ class Localizer:
             self.evidence_params,
             self.map.index,
             exclude=exclude,
-            table_rays=self.map.rays,
         )
         timing = {"extraction": extraction_ms, **evidence.timing_ms}
         return Observation(fingerprint, evidence, timing)
@@ -264,7 +284,7 @@ class Localizer:
         on less than :data:`~localizer.lookalikes.EXACT_COUNTERPART_SHARE`), else None."""
         if place_id is None or place_id not in self.counterparts:
             return None
-        keypoints = self.map.fingerprint(place_id).n
+        keypoints = self.map.keypoints(place_id)
         for partner in self.counterparts[place_id]:
             if self._pair_inliers(place_id, partner) < EXACT_COUNTERPART_SHARE * keypoints:
                 return place_id
@@ -335,16 +355,16 @@ class Localizer:
 
     def _pair_inliers(self, query_id: int, reference_id: int) -> int:
         if query_id == reference_id:
-            return self.map.fingerprint(query_id).n
+            return self.map.keypoints(query_id)
         key = (query_id, reference_id)
         if key not in self._similarity:
-            query_rows = self.map.table.rows(self.map.table_index(query_id))
+            query = self.map.fingerprint(query_id)
             evidence = evaluate_place(
-                self.map.fingerprint(query_id),
-                self.map.rays[query_rows],
-                self.map.table,
-                self.map.rays,
-                self.map.table_index(reference_id),
+                query,
+                query.rays(),
+                self.map.fingerprint(reference_id),
+                reference_id,
+                self.map.table.rooms[self.map.table_index(reference_id)],
                 self.evidence_params,
             )
             self._similarity[key] = evidence.inliers

@@ -8,7 +8,9 @@ Two shapes for the localizer's start-up:
   in one ``(N, d)`` matrix, with per-place offsets), built from one ``b"".join`` per column;
   ready for a single nearest-neighbour index over the whole map.
 - :func:`load_snapshot`: that table with the places, rooms and room graph, read once at a
-  localizer's start-up.
+  localizer's start-up; for a big map (``on_disk_from`` places or more) a
+  :class:`mapdb.store.SqlitePlaceStore` instead, which keeps only the places' metadata and
+  reads fingerprints on demand.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from mapdb.codec import (
 )
 from mapdb.database import MapDatabase
 from mapdb.errors import EmptyMapError, translate_sqlite_error
-from mapdb.records import FingerprintTable, MapSnapshot, StoredFingerprint
+from mapdb.records import FingerprintTable, MapSnapshot, PlaceStore, StoredFingerprint
+from mapdb.store import PlaceCatalog, SqlitePlaceStore
 
 _SELECT = (
     "SELECT f.place_id, r.name, f.detector, p.image_width_px, p.image_height_px, "
@@ -126,15 +129,24 @@ def open_for_reading(path: Path) -> MapDatabase:
     return MapDatabase.open(path, create=False, readonly=True)
 
 
-def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
-    """Read what a localizer needs from the map at ``path`` (read-only, then closed).
+def load_snapshot(
+    path: Path | str, detector: str = "sift", on_disk_from: int | None = None
+) -> MapSnapshot:
+    """Read what a localizer needs from the map at ``path`` (read-only, then closed): the
+    fingerprints stacked in memory, or, if the map has ``on_disk_from`` or more ``detector``
+    places, a :class:`~mapdb.store.SqlitePlaceStore` over them (metadata only in memory).
 
     Raises :class:`mapdb.errors.EmptyMapError` (a ``ValueError``) if the map has no place with
     a ``detector`` fingerprint; every error is a :class:`mapdb.errors.MapDatabaseError`.
     """
     path = Path(path)
+    table: PlaceStore
     with open_for_reading(path) as opened, opened.reading() as map_db:
-        table = load_fingerprint_table(map_db, detector)
+        on_disk = on_disk_from is not None and _count(map_db, detector) >= on_disk_from
+        if on_disk:
+            table = SqlitePlaceStore(path, PlaceCatalog.read(map_db, detector))
+        else:
+            table = load_fingerprint_table(map_db, detector)
         places = map_db.places()
         rooms = tuple(room.name for room in map_db.rooms())
         edges = tuple(map_db.edges())
@@ -146,3 +158,11 @@ def load_snapshot(path: Path | str, detector: str = "sift") -> MapSnapshot:
     kept = tuple(p for p in places if p.id in with_fingerprint)
     kept_rooms = tuple(r for r in rooms if any(p.room == r for p in kept))
     return MapSnapshot(path, table, kept, kept_rooms, edges, likelihood)
+
+
+def _count(map_db: MapDatabase, detector: str) -> int:
+    sql = "SELECT COUNT(*) FROM fingerprints WHERE detector = ?"
+    try:
+        return int(map_db.db.execute(sql, [detector]).fetchone()[0])
+    except sqlite3.Error as error:
+        raise translate_sqlite_error(error, map_db.path) from error

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import InitVar, asdict, dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -332,6 +332,20 @@ class FingerprintTable:
         """For each stacked row, the index of its place in ``place_ids``."""
         return np.repeat(np.arange(len(self.place_ids)), np.diff(self.offsets))
 
+    @cached_property
+    def keypoint_counts(self) -> np.ndarray:
+        """(m,) int64 keypoints of each place."""
+        return np.diff(self.offsets).astype(np.int64)
+
+    @property
+    def descriptor_dim(self) -> int:
+        """Values per descriptor (0 for an empty table)."""
+        return int(self.descriptors.shape[1]) if self.descriptors.ndim == 2 else 0
+
+    def fingerprints(self, indices: Sequence[int] | np.ndarray) -> list[Fingerprint]:
+        """The fingerprints of the places at ``indices``, in that order (:meth:`fingerprint`)."""
+        return [self.fingerprint(int(i)) for i in indices]
+
     def rows(self, i: int) -> slice:
         """The stacked rows of the place at index ``i``."""
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
@@ -383,14 +397,61 @@ class FingerprintTable:
         )
 
 
+class PlaceStore(Protocol):
+    """Where a localizer reads one detector's stored places from: compact per-place metadata
+    held in memory (the same fields as :class:`FingerprintTable`'s, place ``i`` of each), the
+    full fingerprints read on demand.
+
+    :class:`FingerprintTable` is the store in memory (small maps, tests);
+    :class:`mapdb.store.SqlitePlaceStore` reads them from the SQLite map, keeping a few.
+    """
+
+    @property
+    def detector(self) -> str: ...
+
+    @property
+    def place_ids(self) -> np.ndarray: ...
+
+    @property
+    def rooms(self) -> tuple[str, ...]: ...
+
+    @property
+    def alv_xy(self) -> np.ndarray: ...
+
+    @property
+    def image_sizes_px(self) -> np.ndarray: ...
+
+    @property
+    def params(self) -> tuple[Mapping[str, ParamValue], ...]: ...
+
+    @property
+    def keypoint_counts(self) -> np.ndarray:
+        """(m,) int64 keypoints of each place."""
+        ...
+
+    @property
+    def descriptor_dim(self) -> int:
+        """Values per descriptor (0 for an empty store)."""
+        ...
+
+    def fingerprint(self, i: int) -> Fingerprint:
+        """The full fingerprint of the place at index ``i``."""
+        ...
+
+    def fingerprints(self, indices: Sequence[int] | np.ndarray) -> list[Fingerprint]:
+        """The full fingerprints of the places at ``indices``, in that order."""
+        ...
+
+
 @dataclass(frozen=True)
 class MapSnapshot:
-    """What a localizer reads from a map once at start-up: one detector's fingerprints stacked,
+    """What a localizer reads from a map once at start-up: one detector's fingerprints (stacked
+    in memory, or a store reading them from the map on demand),
     the places that have one, the rooms that have such places, the room graph, and the
     likelihood calibrated on that detector's evidence (JSON; None if the map has none)."""
 
     path: Path
-    table: FingerprintTable
+    table: PlaceStore
     places: tuple[Place, ...]
     rooms: tuple[str, ...]
     edges: tuple[tuple[str, str], ...]

@@ -1,11 +1,15 @@
 """Maps for the shell: a database file loaded for the localizer, and the maps of the rendered
 worlds, made on first use and kept in a cache folder.
 
-:func:`load_map` reads a map once (``mapdb.loading``) and prepares it for the localizer (rays,
-retrieval index). The demo and ``toploc sim kidnap`` need a map of a preset world: the world's
-dataset is rendered (``robot.dataset``) and built into a SQLite map (``mapdb.build``) once, then
-reused. The cache is ``$TOPLOC_HOME`` or ``~/.cache/toploc``; a half-made map (an interrupted
-first run) is completed on the next, since rendering and building are both resumable.
+:func:`load_map` reads a map once (``mapdb.loading``) and prepares it for the localizer (the
+retrieval index). A map of ``ON_DISK_MIN_PLACES`` places or more is not held in memory: its
+fingerprints are read from the file on demand and its index is the compact one kept beside the
+map (:mod:`toploc.map_index`).
+
+The demo and ``toploc sim kidnap`` need a map of a preset world: the world's dataset is rendered
+(``robot.dataset``) and built into a SQLite map (``mapdb.build``) once, then reused. The cache
+is ``$TOPLOC_HOME`` or ``~/.cache/toploc``; a half-made map (an interrupted first run) is
+completed on the next, since rendering and building are both resumable.
 """
 
 from __future__ import annotations
@@ -32,27 +36,51 @@ from mapdb.dataset import MANIFEST_NAME, read_edges, read_manifest
 from mapdb.errors import EmptyMapError
 from mapdb.graph import connect_known_rooms
 from mapdb.loading import load_snapshot, open_for_reading
+from mapdb.store import SqlitePlaceStore
 from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
 from robot.sim_robot import MotionNoise, SimulatedRobot
 from robot.world import World
 from toploc.extraction import map_overrides, resolve_extractor
+from toploc.map_index import compact_index
 
 HOME_ENV = "TOPLOC_HOME"
 
+ON_DISK_MIN_PLACES = 1000
+"""From this many places a map's fingerprints stay on disk and its shortlist is the compact
+index (docs/speed.md, "Maps of 10,000 places": at 1,000 places it matched the FLANN index's
+top-1 in a fiftieth of the memory)."""
+
+STORAGES = ("auto", "memory", "disk")
+
 
 def load_map(
-    db_path: Path | str, detector: str = "sift", use_index: bool | None = None
+    db_path: Path | str,
+    detector: str = "sift",
+    use_index: bool | None = None,
+    storage: str = "auto",
 ) -> LoadedMap:
     """The map at ``db_path`` ready for a :class:`localizer.localizer.Localizer` (read once, the
-    database closed again). Raises :class:`mapdb.errors.MapDatabaseError` with a one-line
-    message for a map without ``detector`` fingerprints (``EmptyMapError``, also a
-    ``ValueError``) and for a missing, locked or damaged file."""
+    database closed again). ``storage``: ``"memory"`` (every fingerprint stacked in memory, a
+    FLANN index), ``"disk"`` (fingerprints read on demand, the compact index from its cache
+    file, built or extended as needed) or ``"auto"`` (disk from ``ON_DISK_MIN_PLACES`` places).
+    ``use_index`` False: brute force (in memory only). Raises
+    :class:`mapdb.errors.MapDatabaseError` with a one-line message for a map without
+    ``detector`` fingerprints (``EmptyMapError``, also a ``ValueError``) and for a missing,
+    locked or damaged file."""
+    if storage not in STORAGES:
+        raise ValueError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+    on_disk_from = {"auto": ON_DISK_MIN_PLACES, "memory": None, "disk": 0}[storage]
+    if use_index is False:
+        on_disk_from = None
     try:
-        snapshot = load_snapshot(db_path, detector)
+        snapshot = load_snapshot(db_path, detector, on_disk_from)
     except EmptyMapError:
         check_detector(db_path, detector)  # say which detectors the map holds, if any
         raise
+    if isinstance(snapshot.table, SqlitePlaceStore):
+        index, _ = compact_index(snapshot.table)
+        return LoadedMap.from_snapshot(snapshot, index=index)
     return LoadedMap.from_snapshot(snapshot, use_index)
 
 

@@ -1,4 +1,5 @@
-"""The FLANN place index: votes, shortlists, and agreement with brute-force evidence."""
+"""The place indices (FLANN over descriptors, faiss IVF-PQ over codes): votes, shortlists,
+leave-one-out, adding places, and agreement with brute-force evidence."""
 
 from __future__ import annotations
 
@@ -10,7 +11,13 @@ import pytest
 
 from localizer.evidence import EvidenceParams, place_evidence
 from localizer.features import extract_preset
-from localizer.retrieval import IndexParams, PlaceIndex
+from localizer.retrieval import (
+    CompactParams,
+    CompactPlaceIndex,
+    IndexParams,
+    PlaceIndex,
+    lists_for,
+)
 from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_fingerprint_table
@@ -137,3 +144,92 @@ def test_searching_on_two_threads_gives_the_same_scores() -> None:
     np.testing.assert_array_equal(one, two)
     with pytest.raises(ValueError, match="threads"):
         IndexParams(threads=0)
+
+
+@pytest.fixture(scope="module")
+def trained() -> CompactPlaceIndex:
+    """An empty compact index trained on uniform random descriptors, as :func:`random_table`'s."""
+    return CompactPlaceIndex.train(np.random.default_rng(9).random((3000, 128), np.float32))
+
+
+def filled(trained: CompactPlaceIndex, table: FingerprintTable, places: int | None = None):
+    """``trained``'s quantisers with the first ``places`` (default all) places of ``table``."""
+    index = trained.emptied()
+    count = len(table.place_ids) if places is None else places
+    index.add_places([table.fingerprint(i).descriptors for i in range(count)])
+    return index
+
+
+def test_compact_index_shortlists_the_planted_place_first(trained) -> None:
+    rng = np.random.default_rng(0)
+    table = random_table(rng, [80, 200, 120, 60, 150, 90] * 3)
+    index = filled(trained, table)
+    assert index.n_places == 18 and index.n_codes == len(table.descriptors)
+    for place in range(18):
+        rows = table.fingerprint(place).descriptors
+        query = rows[::2] + rng.normal(0, 0.01, rows[::2].shape).astype(np.float32)
+        assert index.shortlist(query, 3)[0] == place
+
+
+def test_compact_index_leaves_a_place_out_as_the_flann_index_does(trained) -> None:
+    rng = np.random.default_rng(2)
+    table = random_table(rng, [100] * 8)
+    start = table.offsets[1]
+    table.descriptors[table.offsets[7] :] = table.descriptors[start : start + 100] + 0.02
+    index = filled(trained, table)
+    own = table.descriptors[start : start + 100]
+    assert index.shortlist(own, 2)[0] == 1
+    left_out = index.shortlist(own, 2, exclude=1)
+    assert left_out[0] == 7
+    assert 1 not in left_out
+
+
+def test_a_place_added_later_is_encoded_as_if_it_had_been_there_from_the_start(trained) -> None:
+    rng = np.random.default_rng(3)
+    table = random_table(rng, [120] * 8)
+    later = filled(trained, table, places=7)
+    assert later.add_place(table.fingerprint(7).descriptors) == 7
+    assert later.n_places == 8
+    np.testing.assert_array_equal(later.to_bytes(), filled(trained, table).to_bytes())
+    rows = table.fingerprint(7).descriptors[::2]
+    assert later.shortlist(rows + 0.01, 1)[0] == 7
+
+
+def test_compact_index_round_trips_through_bytes(trained) -> None:
+    rng = np.random.default_rng(5)
+    table = random_table(rng, [90] * 6)
+    index = filled(trained, table)
+    query = table.descriptors[::4]
+    copy = CompactPlaceIndex.from_bytes(index.to_bytes(), index.keypoint_counts)
+    np.testing.assert_array_equal(copy.scores(query), index.scores(query))
+    with pytest.raises(ValueError, match="not a compact place index"):
+        CompactPlaceIndex.from_bytes(np.frombuffer(b"no index here", np.uint8), np.ones(1))
+    with pytest.raises(ValueError, match="holds 540 codes, its places 539"):
+        CompactPlaceIndex.from_bytes(index.to_bytes(), np.array([539]))
+
+
+def test_compact_index_refuses_bad_input(trained) -> None:
+    rng = np.random.default_rng(6)
+    with pytest.raises(ValueError, match="n >= 1000"):
+        CompactPlaceIndex.train(rng.random((100, 128), dtype=np.float32))
+    index = filled(trained, random_table(rng, [100, 200]))
+    with pytest.raises(ValueError, match=r"must be \(n, 128\)"):
+        index.shortlist(np.zeros((3, 64), np.float32), 1)
+    with pytest.raises(ValueError, match="probes"):
+        CompactParams(probes=0)
+    assert lists_for(10_000_000) == 4096 and lists_for(100) == 16
+
+
+def test_compact_shortlist_contains_brute_force_winner(corridor) -> None:
+    table, queries = corridor
+    index = CompactPlaceIndex.train(table.descriptors[::3])  # a sample of the map's
+    index.add_places([table.fingerprint(i).descriptors for i in range(len(table.place_ids))])
+    params = EvidenceParams(shortlist=3)
+    for query in queries:
+        brute = place_evidence(query, table, params)
+        assert brute.best is not None
+        winner = int(np.flatnonzero(table.place_ids == brute.best.place_id)[0])
+        assert winner in index.shortlist(query.descriptors, params.shortlist)
+        indexed = place_evidence(query, table, params, index)
+        assert indexed.best is not None and indexed.best.place_id == brute.best.place_id
+        assert indexed.best.inliers == brute.best.inliers

@@ -47,6 +47,7 @@ from toploc.commands.map_text import (
 from toploc.commands.options import camera_option, db_option
 from toploc.commands.record import record_command
 from toploc.extraction import map_overrides, resolve_extractor
+from toploc.map_index import refresh_index_files
 
 DEFAULT_DETECTORS = ("sift",)
 """What ``map build`` and ``map add`` extract unless told: what ``localize`` reads by default."""
@@ -327,6 +328,9 @@ def add_command(
             named = outcome.message.startswith((f"{image}:", f"{image.name}:"))
             raise click.ClickException(outcome.message if named else f"{image}: {outcome.message}")
     click.echo(outcome.describe())
+    if outcome.status is Status.ADDED:
+        with _map_errors():
+            refresh_index_files(db_path)  # a big map's compact index: the place encoded
     if calibrate and outcome.status is Status.ADDED:
         with _map_errors():
             _calibrate(db_path, presets, progress=False)
