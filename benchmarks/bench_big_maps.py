@@ -31,7 +31,6 @@ import hashlib
 import json
 import math
 import os
-import resource
 import sqlite3
 import subprocess
 import sys
@@ -41,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from process_memory import peak_rss_mib, rss_mib
 
 from localizer.features import extract_preset
 from localizer.robot_protocol import Pose2D
@@ -276,18 +276,6 @@ def render_image(shot: Shot) -> np.ndarray:
     )
     noise_seed = (shot.seed, int(shot.x_m * 1000), int(shot.y_m * 1000), len(shot.room))
     return render_panorama(_SCENE[key], pose, CAMERA, condition, seed=noise_seed, grey=True)
-
-
-def rss_mib() -> float:
-    """Current resident set size of this process in MiB (Linux)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def peak_rss_mib() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def run_one(args: argparse.Namespace) -> dict:

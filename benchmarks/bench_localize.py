@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import math
-import resource
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
@@ -33,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from process_memory import peak_rss_mib, rss_mib
 
 from localizer.evidence import EvidenceParams, QueryEvidence, place_evidence
 from localizer.features import extract_preset
@@ -175,19 +175,6 @@ def choose_places(n_total: int, n_target: int, size: int) -> np.ndarray:
     k = min(size, n_target)
     target = np.unique(np.round(np.linspace(0, n_target - 1, k)).astype(int))
     return np.concatenate([target, np.arange(n_target, n_target + size - len(target))])
-
-
-def rss_mib() -> float:
-    """Current resident set size of this process in MiB (Linux)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def peak_rss_mib() -> float:
-    """Peak resident set size of this process so far, MiB."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 @dataclass

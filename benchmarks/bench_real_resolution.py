@@ -53,6 +53,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from process_memory import rss_mib
 from scipy.spatial import cKDTree
 
 from localizer.cameras import CameraSpec
@@ -154,15 +155,6 @@ class RunResult:
     right: int
     load_rss_mib: float
     peak_rss_mib: float
-
-
-def rss_mib(field: str = "VmRSS") -> float:
-    """This process's current (``VmRSS``) or peak (``VmHWM``) resident set, MiB (Linux). Not
-    ``ru_maxrss``: that carries the parent's peak over fork and exec."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(f"{field}:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def time_map(

@@ -33,7 +33,6 @@ import json
 import logging
 import math
 import os
-import resource
 import socket
 import threading
 import time
@@ -43,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from process_memory import peak_rss_mib, rss_mib
 
 from robot.worlds import make_world
 from toploc import bus
@@ -61,19 +61,6 @@ def free_endpoint() -> str:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
-
-
-def rss_mib() -> float:
-    """Current resident set size of this process in MiB (Linux ``/proc/self/status``)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
-def peak_rss_mib() -> float:
-    """Peak resident set size of this process so far, MiB."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def finite_belief(belief: dict[str, Any]) -> bool:
