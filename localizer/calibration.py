@@ -82,13 +82,16 @@ def leave_one_out(
     max_queries: int = MAX_QUERIES,
     *,
     count: str,
+    places: Sequence[int] | None = None,
 ) -> Iterator[LeftOut]:
-    """Per queried place (:func:`query_places`): the :class:`LeftOut` query, the best counts
-    (``count``, see :func:`~localizer.likelihood.place_count`) taken when the place is the
-    query and itself is left out (yielded one by one: this takes a while)."""
+    """Per queried place (:func:`query_places`, or the table indices ``places``): the
+    :class:`LeftOut` query, the best counts (``count``, see
+    :func:`~localizer.likelihood.place_count`) taken when the place is the query and itself is
+    left out (yielded one by one: this takes a while)."""
     params = params or EvidenceParams()
     table = loaded.table
-    for i in query_places(table.rooms, max_queries):
+    chosen = query_places(table.rooms, max_queries) if places is None else places
+    for i in chosen:
         place_id = table.place_ids[i]
         evidence = place_evidence(
             table.fingerprint(i),
@@ -181,6 +184,14 @@ def _calibrate_with(
         if on_query is not None:
             on_query()
     samples = CalibrationSamples.from_queries(((q.room, q.counts) for q in queries), room_sizes)
+    if samples.unasked_lookalikes:
+        # a map of more rooms than queries: ask the rooms some query found nearly as good as
+        # its own, so that a pair of twins is judged from both sides
+        first_place = {room: i for i, room in reversed(list(enumerate(loaded.table.rooms)))}
+        extra = [first_place[room] for room in samples.unasked_lookalikes[:max_queries]]
+        for query in leave_one_out(loaded, params, count=count, places=sorted(extra)):
+            queries.append(query)
+        samples = CalibrationSamples.from_queries(((q.room, q.counts) for q in queries), room_sizes)
     model = fit_ratio_likelihood(samples, prior)
     if not samples.lookalike_pairs:
         return model, samples

@@ -39,3 +39,10 @@ def test_the_map_keeps_its_calibration(building_map, tmp_path) -> None:
     assert load_map(db_path).likelihood == RatioLikelihood(intercept=-1.0)
     stored = calibrate_map(db_path, "sift")
     assert load_map(db_path).likelihood == stored != RatioLikelihood(intercept=-1.0)
+
+
+def test_a_twin_the_queries_missed_is_asked_before_the_pair_is_judged(building_map) -> None:
+    loaded = LoadedMap.from_snapshot(load_snapshot(building_map[0]))
+    # two queries: one from the corridor, one from office_a; office_b is asked afterwards
+    model, _ = calibrate(loaded, max_queries=2)
+    assert model.lookalikes == (("office_a", "office_b"),)

@@ -217,3 +217,16 @@ def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_
     ]
     samples = CalibrationSamples.from_queries(queries, sizes)
     assert samples.lookalike_pairs == (("office_a", "office_b"),)
+
+
+def test_a_room_no_query_came_from_is_no_look_alike_but_is_named_to_ask():
+    from localizer.likelihood import CalibrationSamples
+
+    sizes = {"office_a": 3, "office_b": 3, "kitchen": 3}
+    queries = [
+        ("office_a", {"office_a": 200.0, "office_b": 180.0}),
+        ("kitchen", {"kitchen": 150.0, "office_a": 12.0}),
+    ]
+    samples = CalibrationSamples.from_queries(queries, sizes)
+    assert samples.lookalike_pairs == ()
+    assert samples.unasked_lookalikes == ("office_b",)
