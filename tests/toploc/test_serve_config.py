@@ -183,3 +183,24 @@ def test_the_example_in_the_help_is_a_valid_config(tmp_path):
     assert (params["robot_id"], params["policy"], params["source"]) == (
         "kitchen-bot", "most-likely", "uvc:0",
     )  # fmt: skip
+
+
+@pytest.mark.parametrize("command", ["robot", "camera", "localizer", "map", "ros2"])
+def test_every_node_takes_its_options_from_a_file_and_refuses_an_unknown_key(tmp_path, command):
+    config = write(tmp_path, "no-such-option = 1\n")
+    done = CliRunner().invoke(main, ["node", command, "--config", str(config)])
+    assert done.exit_code == 1, done.output
+    assert done.output.startswith(f"Error: {config}: unknown key 'no-such-option'; known: ")
+
+
+def test_a_map_node_reads_its_map_and_id_from_the_file(tmp_path):
+    from toploc.commands.node import map_node
+
+    config = write(tmp_path, 'db = "site.db"\nmap-id = "site-1"\nnew-map = true\n')
+    with map_node.make_context("map", ["--config", str(config)]) as ctx:
+        params = dict(ctx.params)
+    assert (params["db_path"], params["map_id"], params["new_map"]) == (
+        tmp_path / "site.db",
+        "site-1",
+        True,
+    )

@@ -28,6 +28,7 @@ from toploc import bus
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import client_bus_config
 from toploc.commands.bus_client import client_options
+from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
     StopSignal,
     camera_option,
@@ -90,6 +91,7 @@ def _run(
 
 
 @node_group.command("robot")
+@config_file_option
 @long_running
 @click.option(
     "--robot",
@@ -161,6 +163,7 @@ def robot_node(
 
 
 @node_group.command("camera")
+@config_file_option
 @long_running
 @click.option(
     "--source",
@@ -197,6 +200,7 @@ def camera_node(
 
 
 @node_group.command("localizer")
+@config_file_option
 @long_running
 @db_option(SHARED_MAP, exists=True)
 @policy_option
@@ -231,6 +235,7 @@ def localizer_node(
 
 
 @node_group.command("map")
+@config_file_option
 @long_running
 @db_option(SHARED_MAP)
 @click.option("--new-map", is_flag=True, help="Create the --db file empty if it does not exist.")
@@ -291,6 +296,7 @@ def map_node(
 
 
 @node_group.command("ros2")
+@config_file_option
 @long_running
 @client_options
 @ros2_options
