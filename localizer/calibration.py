@@ -31,7 +31,7 @@ from localizer.likelihood import (
     room_inliers,
 )
 from localizer.localizer import LoadedMap
-from localizer.lookalikes import is_counterpart
+from localizer.lookalikes import is_counterpart, partners_of
 
 MAX_QUERIES = 60
 """Leave-one-out queries per calibration: about 20 s here, whatever the size of the map."""
@@ -113,10 +113,7 @@ def counterpart_pairs(
     other that its view verified on a counterpart's share of its keypoints (place ids, each pair
     once, lower id first). A place that was not queried (a map of more than ``MAX_QUERIES``
     places) may still be found as another's counterpart."""
-    twins: dict[str, set[str]] = {}
-    for a, b in pairs:
-        twins.setdefault(a, set()).add(b)
-        twins.setdefault(b, set()).add(a)
+    twins = partners_of(pairs)
     found: set[tuple[int, int]] = set()
     for query in queries:
         keypoints = int(loaded.table.keypoint_counts[query.table_index])

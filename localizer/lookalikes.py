@@ -48,8 +48,8 @@ EXACT_COUNTERPART_SHARE = 0.6
 """Counterparts that verify each other on at least this share stand at one spot so exactly that
 a frame taken where the robot homed to one of them compares both fairly: the batch map's grid
 twins (0.80–0.94). Below it (0.3–0.5: a few decimetres apart, as counterparts recorded by hand
-are), the place homed to wins by the offset alone, and its pair is not read
-(:func:`twin_counts`' ``at_place``)."""
+are), the place homed to wins by the offset alone, and its pair is read only when that place
+loses it (:func:`twin_counts`' ``at_place``)."""
 
 
 def lookalike_groups(
