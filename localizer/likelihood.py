@@ -343,7 +343,9 @@ class CalibrationSamples:
         pairs = {
             (min(a, b), max(a, b))
             for a, b in flagged
-            if flagged[(a, b)] >= 0.5 * asked[a] and 0 < flagged[(b, a)] >= 0.5 * asked[b]
+            if flagged[(b, a)] > 0  # b was asked, and found a too
+            and flagged[(a, b)] >= 0.5 * asked[a]
+            and flagged[(b, a)] >= 0.5 * asked[b]
         }
         unasked = sorted({b for _, b in flagged if asked[b] == 0})
         return cls(
