@@ -31,7 +31,7 @@ from localizer.likelihood import (
     room_inliers,
 )
 from localizer.localizer import LoadedMap
-from localizer.lookalikes import is_counterpart, partners_of
+from localizer.lookalikes import alike_by_appearance, is_counterpart, partners_of
 
 MAX_QUERIES = 60
 """Leave-one-out queries per calibration: about 20 s here, whatever the size of the map."""
@@ -180,7 +180,7 @@ def _calibrate_with(
         queries.append(query)
         if on_query is not None:
             on_query()
-    samples = CalibrationSamples.from_queries(((q.room, q.counts) for q in queries), room_sizes)
+    samples = _samples(loaded, queries, room_sizes)
     if samples.unasked_lookalikes:
         # a map of more rooms than queries: ask the rooms some query found nearly as good as
         # its own, so that a pair of twins is judged from both sides
@@ -188,7 +188,7 @@ def _calibrate_with(
         extra = [first_place[room] for room in samples.unasked_lookalikes[:max_queries]]
         for query in leave_one_out(loaded, params, count=count, places=sorted(extra)):
             queries.append(query)
-        samples = CalibrationSamples.from_queries(((q.room, q.counts) for q in queries), room_sizes)
+        samples = _samples(loaded, queries, room_sizes)
     model = fit_ratio_likelihood(samples, prior)
     if not samples.lookalike_pairs:
         return model, samples
@@ -196,3 +196,26 @@ def _calibrate_with(
     fit = dict(model.fit) | {"n_counterparts": float(len(counterparts))}
     model = replace(model, lookalikes=samples.lookalike_pairs, counterparts=counterparts, fit=fit)
     return model, samples
+
+
+def best_matches(query: LeftOut) -> dict[str, tuple[int, int]]:
+    """Per room, the (matches, inliers) of its place that gave the left-out view the most
+    ratio-test matches (rooms the view reached no place of are left out)."""
+    best: dict[str, tuple[int, int]] = {}
+    for item in query.evidence:
+        if item.matches > best.get(item.room, (-1, 0))[0]:
+            best[item.room] = (int(item.matches), int(item.inliers))
+    return best
+
+
+def _samples(
+    loaded: LoadedMap, queries: Sequence[LeftOut], room_sizes: Counter[str]
+) -> CalibrationSamples:
+    """The calibration samples of ``queries``, with the rooms each view finds alike by their
+    descriptors (:func:`localizer.lookalikes.alike_by_appearance`)."""
+    alike = [
+        alike_by_appearance(q.room, best_matches(q), room_sizes, loaded.edges) for q in queries
+    ]
+    return CalibrationSamples.from_queries(
+        ((q.room, q.counts) for q in queries), room_sizes, alike=alike
+    )

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -293,40 +293,63 @@ class CalibrationSamples:
         lookalike_fraction: float = 0.8,
         chance_fraction: float = 0.1,
         pair_fraction: float = 0.5,
+        pair_min_inliers: float = 8.0,
+        pair_chance_factor: float = 4.0,
+        alike: Sequence[Collection[str]] = (),
     ) -> CalibrationSamples:
         """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
         per room) says whether the query's room had another place to match.
 
-        Two rooms are a look-alike pair when each explains at least half of the other's
-        queries at ``pair_fraction`` of the query's own count or more (and at least
-        ``lookalike_min_inliers``). That is looser than a query's own twin test
-        (``lookalike_fraction``): a room recorded at places a metre apart explains its own
-        views better than the twin does (office_a 209 spread inliers, office_b 110 on a map
-        recorded with three places per office, every other room at most 13), yet the twin
-        explains every one of them."""
+        Two rooms are a look-alike pair when each finds the other in at least half of its
+        queries: at ``pair_fraction`` of the query's own count or more, at least
+        ``pair_chance_factor`` times the median of the query's other rooms and at least
+        ``pair_min_inliers`` (the bare house's twin bedrooms, recorded three places each,
+        explain each other's views at 8–50 spread inliers, their own rooms at 6–21, every
+        other room at most 2), or among the rooms that look like the query's by their
+        descriptors (``alike``, one collection per query in order;
+        :func:`localizer.lookalikes.alike_by_appearance`). That is looser than a query's own
+        twin test (``lookalike_fraction``): a room recorded at places a metre apart explains
+        its own views better than the twin does (office_a 209 spread inliers, office_b 110 on a
+        map recorded with three places per office, every other room at most 13), yet the twin
+        explains every one of them. A pair's counts in each other's views are never chance
+        counts, however low (its places far from the view's spot)."""
+        queries = list(queries)
+        flagged: Counter[tuple[str, str]] = Counter()
+        asked: Counter[str] = Counter()
+        for k, (own_room, best) in enumerate(queries):
+            own = float(best.get(own_room, 0.0))
+            seen_alike = alike[k] if k < len(alike) else ()
+            asked[own_room] += 1
+            for room in room_sizes:
+                if room == own_room:
+                    continue
+                rest = [float(best.get(r, 0.0)) for r in room_sizes if r not in (own_room, room)]
+                chance = float(np.median(rest)) if rest else 0.0
+                bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
+                if float(best.get(room, 0.0)) >= bar or room in seen_alike:
+                    flagged[(own_room, room)] += 1
+        # twins explain most of each other's views; a room seen through a door explains only
+        # the views near it (on the dense house, hall and living room against the bedrooms)
+        pairs = mutual_pairs(flagged, asked)
+        paired = {frozenset(pair) for pair in pairs}
         same: list[float] = []
         other: list[float] = []
         max_other: list[float] = []
         n_lookalike = 0
-        flagged: Counter[tuple[str, str]] = Counter()
-        asked: Counter[str] = Counter()
         for own_room, best in queries:
             own = float(best.get(own_room, 0.0))
             has_own = room_sizes.get(own_room, 0) >= 2
-            others = [float(best.get(room, 0.0)) for room in room_sizes if room != own_room]
             bar = max(lookalike_min_inliers, lookalike_fraction * own)
             twins = [r for r in room_sizes if r != own_room and float(best.get(r, 0.0)) >= bar]
-            pair_bar = max(lookalike_min_inliers, pair_fraction * own)
-            asked[own_room] += 1
-            flagged.update(
-                (own_room, r)
-                for r in room_sizes
-                if r != own_room and float(best.get(r, 0.0)) >= pair_bar
-            )
+            not_chance = set(twins) | {r for r in room_sizes if frozenset((own_room, r)) in paired}
+            others = [
+                float(best.get(room, 0.0))
+                for room in room_sizes
+                if room != own_room and room not in not_chance
+            ]
             lookalikes = [float(best.get(room, 0.0)) for room in twins]
             if lookalikes:
                 n_lookalike += len(lookalikes)
-                others = [count for count in others if count < bar]
                 own = max(own, *lookalikes)
             if has_own or lookalikes:
                 same.append(own)
@@ -336,26 +359,36 @@ class CalibrationSamples:
             unseen = [count for count in others if count < seen_bar]
             if unseen:
                 max_other.append(max(unseen))
-        # twins explain most of each other's views; a room seen through a door explains only
-        # the views near it (on the dense house, hall and living room against the bedrooms)
-        # (a room never queried cannot say it looks like another: on a map of more rooms than
-        # queries that vacuous "half of none" joined 277 pairs over 494 rooms)
-        pairs = {
-            (min(a, b), max(a, b))
-            for a, b in flagged
-            if flagged[(b, a)] > 0  # b was asked, and found a too
-            and flagged[(a, b)] >= 0.5 * asked[a]
-            and flagged[(b, a)] >= 0.5 * asked[b]
-        }
         unasked = sorted({b for _, b in flagged if asked[b] == 0})
         return cls(
             np.array(same),
             np.array(other),
             np.array(max_other),
             n_lookalike,
-            tuple(sorted(pairs)),
+            pairs,
             tuple(unasked),
         )
+
+
+def mutual_pairs(
+    flagged: Mapping[tuple[str, str], int], asked: Mapping[str, int]
+) -> tuple[tuple[str, str], ...]:
+    """The pairs of rooms each of which found the other in at least half of its queries
+    (``flagged[(a, b)]``: queries from ``a`` that found ``b``; ``asked[a]``: queries from
+    ``a``), each pair once as sorted names. A room never queried pairs with nothing (on a map
+    of more rooms than queries that vacuous "half of none" joined 277 pairs over 494 rooms)."""
+    return tuple(
+        sorted(
+            {
+                (min(a, b), max(a, b))
+                for (a, b), n in flagged.items()
+                if n > 0
+                and flagged.get((b, a), 0) > 0  # b was asked, and found a too
+                and n >= 0.5 * asked.get(a, 0)
+                and flagged[(b, a)] >= 0.5 * asked.get(b, 0)
+            }
+        )
+    )
 
 
 INLIER_SCALE = 100.0

@@ -1,8 +1,10 @@
 """Look-alike rooms, and when their inlier counts may be compared (issue 19, section 2).
 
-Two rooms are look-alikes when, in the map's own leave-one-out, a place of one is explained by
-the other nearly as well as by its own room (:class:`localizer.likelihood.CalibrationSamples`):
-the twin offices of ``building``, the twin bedrooms of ``house``. Between look-alikes the
+Two rooms are look-alikes when, in the map's own leave-one-out, each explains most of the
+other's views nearly as well as their own room does, or far above chance
+(:class:`localizer.likelihood.CalibrationSamples`), or shows what they show without verifying
+it, as a twin a metre off does (:func:`alike_by_appearance`): the twin offices of
+``building``, the twin bedrooms of ``house``. Between look-alikes the
 inlier count measures how near the robot is to a stored place, not which room it is in. On a
 map recorded a few places per room, the twins' places stand at different spots of their
 identical frames, and the twin whose place is nearer the robot wins by dozens of inliers (a
@@ -50,6 +52,60 @@ a frame taken where the robot homed to one of them compares both fairly: the bat
 twins (0.80–0.94). Below it (0.3–0.5: a few decimetres apart, as counterparts recorded by hand
 are), the place homed to wins by the offset alone, and its pair is read only when that place
 loses it (:func:`twin_counts`' ``at_place``)."""
+
+
+APPEARANCE_MIN_MATCHES = 20
+"""A room looks like a view's own room by its descriptors when its best-matching place gives
+the view at least this many ratio-test matches (before any geometry), ..."""
+APPEARANCE_OWN_FRACTION = 0.5
+"""... at least this share of the own room's best matches (when the own room has another
+place), ..."""
+APPEARANCE_CHANCE_FACTOR = 2.5
+"""... at least this many times the median of the other rooms' best matches, ..."""
+APPEARANCE_MAX_VERIFIED = 0.5
+"""... and the essential matrix verifies at most this share of those matches: what the view
+shows alike does not stand where that place sees it."""
+
+
+def alike_by_appearance(
+    own_room: str,
+    matches: Mapping[str, tuple[int, int]],
+    room_sizes: Mapping[str, int],
+    edges: Iterable[tuple[str, str]] = (),
+) -> frozenset[str]:
+    """The rooms that look like the room of a view (``own_room``) by its descriptors:
+    ``matches`` holds, per room, the (matches, inliers) of its best-matching place for the view
+    (rooms missing: none); ``room_sizes``: places per room; rooms joined by one of ``edges``
+    are left out (they see each other through their door).
+
+    Matches count what two views show alike; inliers also ask that it stand where it stands in
+    the other view. Twins recorded a metre or more apart in their frames show the same things
+    from elsewhere: many matches, few inliers. On maps recorded with one place per room, twin
+    offices matched at 99 and 109 and verified each other at 20 and 23 spread inliers (every
+    other room 9–26 matches), the bare house's twin bathrooms at 44 and 54 matches and 5
+    (others 6–19 matches). A room seen through a door or an opening is matched and verified
+    alike (the dense house's living room on a bedroom's places: 124–165 matches, 70–87 %
+    verified) and is left to the inlier counts. Thresholds: :data:`APPEARANCE_MIN_MATCHES`,
+    :data:`APPEARANCE_OWN_FRACTION`, :data:`APPEARANCE_CHANCE_FACTOR`,
+    :data:`APPEARANCE_MAX_VERIFIED`."""
+    adjacent = {frozenset(edge) for edge in edges}
+    own = float(matches.get(own_room, (0, 0))[0]) if room_sizes.get(own_room, 0) >= 2 else 0.0
+    rooms = [r for r in room_sizes if r != own_room]
+    alike = set()
+    for room in rooms:
+        n_matches, n_inliers = matches.get(room, (0, 0))
+        rest = [float(matches.get(r, (0, 0))[0]) for r in rooms if r != room]
+        chance = float(np.median(rest)) if rest else 0.0
+        bar = max(
+            APPEARANCE_MIN_MATCHES, APPEARANCE_OWN_FRACTION * own, APPEARANCE_CHANCE_FACTOR * chance
+        )
+        if (
+            n_matches >= bar
+            and n_inliers <= APPEARANCE_MAX_VERIFIED * n_matches
+            and frozenset((own_room, room)) not in adjacent
+        ):
+            alike.add(room)
+    return frozenset(alike)
 
 
 def lookalike_groups(

@@ -88,7 +88,7 @@ def test_the_number_of_rooms_does_not_cap_one_frame() -> None:
 
 def test_without_same_room_samples_the_ratio_stays_and_chance_is_measured() -> None:
     one_place_each = CalibrationSamples.from_queries(
-        [("a", {"b": 15.0, "c": 3.0}), ("b", {"a": 12.0, "c": 1.0}), ("c", {"a": 2.0})],
+        [("a", {"b": 15.0, "c": 9.0}), ("b", {"a": 12.0, "c": 8.0}), ("c", {"a": 2.0})],
         {"a": 1, "b": 1, "c": 1},
     )
     model, prior = fit_ratio_likelihood(one_place_each), RatioLikelihood()

@@ -230,3 +230,97 @@ def test_a_room_no_query_came_from_is_no_look_alike_but_is_named_to_ask():
     samples = CalibrationSamples.from_queries(queries, sizes)
     assert samples.lookalike_pairs == ()
     assert samples.unasked_lookalikes == ("office_b",)
+
+
+def test_bare_twins_at_a_few_inliers_are_look_alikes_when_every_other_room_is_chance():
+    from localizer.likelihood import CalibrationSamples
+
+    # the bare house recorded three places per room (world seed 0): the twin bedrooms explain
+    # each other's views at 8-50 spread inliers, their own rooms at 6-21, the rest at 0-2
+    sizes = {"bedroom_a": 3, "bedroom_b": 3, "study": 3, "hall": 3}
+    queries = [
+        ("bedroom_a", {"bedroom_b": 14.0, "bedroom_a": 14.0, "study": 2.0}),
+        ("bedroom_a", {"bedroom_b": 50.0, "bedroom_a": 13.0, "study": 1.0}),
+        ("bedroom_a", {"bedroom_a": 6.0, "bedroom_b": 2.0, "hall": 1.0}),
+        ("bedroom_b", {"bedroom_b": 21.0, "bedroom_a": 13.0}),
+        ("bedroom_b", {"bedroom_b": 21.0, "bedroom_a": 8.0, "study": 1.0}),
+        ("bedroom_b", {"bedroom_a": 48.0, "bedroom_b": 17.0, "hall": 1.0}),
+        ("study", {"study": 70.0, "hall": 2.0}),
+    ]
+    samples = CalibrationSamples.from_queries(queries, sizes)
+    assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
+
+
+def test_a_few_inliers_above_a_high_chance_level_make_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    # shared texture lifts every room of these views to 5-9: 9 is no twin
+    sizes = {"a": 2, "b": 2, "c": 2, "d": 2}
+    queries = [
+        ("a", {"a": 12.0, "b": 9.0, "c": 7.0, "d": 6.0}),
+        ("b", {"b": 12.0, "a": 9.0, "c": 6.0, "d": 5.0}),
+    ]
+    assert CalibrationSamples.from_queries(queries, sizes).lookalike_pairs == ()
+
+
+def test_rooms_alike_by_appearance_in_half_the_views_each_are_look_alikes():
+    from localizer.likelihood import CalibrationSamples
+
+    # one place per office, a metre apart in their frames: 20-23 inliers is not enough for
+    # the count, but each view found the other office alike by its descriptors
+    sizes = {"office_a": 1, "office_b": 1, "kitchen": 1}
+    queries = [
+        ("office_a", {"office_b": 6.0, "kitchen": 2.0}),
+        ("office_b", {"office_a": 5.0, "kitchen": 2.0}),
+        ("kitchen", {"office_a": 3.0}),
+    ]
+    alike = [{"office_b"}, {"office_a"}, set()]
+    samples = CalibrationSamples.from_queries(queries, sizes, alike=alike)
+    assert samples.lookalike_pairs == (("office_a", "office_b"),)
+    # and the twins' counts are no chance samples: only the kitchen's and its views' are
+    assert sorted(samples.other_room) == [0.0, 2.0, 2.0, 3.0]
+
+
+def test_a_room_found_alike_from_one_side_only_is_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    sizes = {"office_a": 1, "office_b": 1}
+    queries = [("office_a", {"office_b": 6.0}), ("office_b", {"office_a": 5.0})]
+    samples = CalibrationSamples.from_queries(queries, sizes, alike=[{"office_b"}, set()])
+    assert samples.lookalike_pairs == ()
+
+
+def test_a_twin_matched_often_and_verified_little_looks_alike():
+    from localizer.lookalikes import alike_by_appearance
+
+    # (matches, inliers) of each room's best-matching place for a view of office_a
+    matches = {"office_b": (99, 30), "storage": (26, 3), "corridor": (22, 2), "kitchen": (19, 1)}
+    sizes = {"office_a": 1, "office_b": 1, "storage": 1, "corridor": 1, "kitchen": 1}
+    assert alike_by_appearance("office_a", matches, sizes) == {"office_b"}
+
+
+def test_a_room_seen_through_an_opening_is_matched_and_verified_so_it_does_not_look_alike():
+    from localizer.lookalikes import alike_by_appearance
+
+    # a view of the living room; a bedroom's places see the living room through their door
+    matches = {"living": (148, 116), "bedroom_a": (136, 100), "hall": (128, 47), "study": (54, 16)}
+    sizes = {"living": 8, "bedroom_a": 3, "hall": 9, "study": 3}
+    assert alike_by_appearance("living", matches, sizes) == frozenset()
+
+
+def test_rooms_joined_by_a_door_never_look_alike_by_appearance():
+    from localizer.lookalikes import alike_by_appearance
+
+    matches = {"seminar": (67, 20), "office_a": (25, 2), "kitchen": (17, 1), "storage": (14, 1)}
+    sizes = {"corridor": 1, "seminar": 1, "office_a": 1, "kitchen": 1, "storage": 1}
+    assert alike_by_appearance("corridor", matches, sizes) == {"seminar"}
+    edges = [("corridor", "seminar")]
+    assert alike_by_appearance("corridor", matches, sizes, edges) == frozenset()
+
+
+def test_a_room_below_half_the_own_rooms_matches_does_not_look_alike():
+    from localizer.lookalikes import alike_by_appearance
+
+    matches = {"hall": (119, 80), "bedroom_a": (24, 4), "kitchen": (22, 3), "study": (21, 3)}
+    sizes = {"hall": 3, "bedroom_a": 3, "kitchen": 3, "study": 3}
+    assert alike_by_appearance("hall", matches, sizes) == frozenset()
