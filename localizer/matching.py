@@ -1,7 +1,10 @@
 """Descriptor matching with Lowe's ratio test: which keypoints of two fingerprints are the same.
 
 The one place that pairs descriptors; the evidence (essential-matrix verification), homing on
-images and the compass all start from :func:`match_descriptors`.
+images and the compass all start from :func:`match_descriptors`. Its exact two nearest
+neighbours come from one matrix product (faiss) when the descriptors are integers, as SIFT's
+are, so that every distance is exact in float32 and the pairs are the brute force's bit for bit
+(:func:`two_nearest_by_product`), and from OpenCV's brute-force matcher otherwise.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ def match_descriptors(
     row is kept when its nearest reference row is closer than ``ratio`` times the second
     nearest (L2), and only if no other query row claims the same reference row (cross-check on
     the kept pairs, so a repeated texture cannot vote twice). Fewer than two reference rows, or
-    an empty side, give no matches.
+    an empty side, give no matches. The float32 distances are compared in float64 (as Python
+    compares OpenCV's ``DMatch.distance``).
     """
     if not 0 < ratio <= 1:
         raise ValueError(f"ratio must be in (0, 1], got {ratio}")
