@@ -228,11 +228,10 @@ def localizer_node(
     limits_path: Path | None,
 ) -> None:
     """The localizer and homing nodes, driving the bus's robot node, until interrupted."""
-    if map_from is None and (db_path is None or not db_path.exists()):
-        raise click.BadParameter(
-            "missing (or --map-from MAP_ID)" if db_path is None else f"{db_path} does not exist",
-            param_hint="--db",
-        )
+    if map_from is None and db_path is None:
+        raise click.UsageError("Missing option '--db' (or --map-from MAP_ID: a site map's replica)")
+    if map_from is None and db_path is not None and not db_path.exists():
+        raise click.BadParameter(f"map {db_path} does not exist", param_hint="--db")
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
     map_path = db_path if map_from is None else site_replica(map_from, db_path)
