@@ -228,6 +228,8 @@ class LocalizerNodes:
     localizer: Localizer | None
     refresher: MapRefresher
     homing: HomingService
+    replicator: MapReplicator | None = None
+    """A site robot's replica keeper (``map_from``), else None."""
 
 
 def enter_robot_node(
@@ -262,16 +264,25 @@ def enter_localizer_nodes(
     refresh_settle_s: float = REFRESH_SETTLE_S,
     recalibrate: bool = True,
     allow_empty: bool = False,
-    map_age: Callable[[], float | None] | None = None,
+    map_from: str | None = None,
 ) -> LocalizerNodes:
     """The localizer and homing nodes on the map at ``db_path`` (``toploc node localizer``),
     driving the bus's robot node (:class:`RemoteRobot`). The map is reloaded after each
     ``map/changed`` of the robot id's map node, in this process or another (one mechanism for
     both; the map node publishes it before its reply, and a session delivers its own
     publications to its subscribers at once). On exit a running localization is ended first.
+    ``map_from``: a site map's id; ``db_path`` is then this robot's replica of it (made or
+    brought up to date first, :func:`enter_replica`), reloaded after each update the replica
+    takes, with the likelihood that comes with the map (no ``recalibrate``); each belief
+    carries the replica's ``map_age_s``.
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
+    replicator = None
+    map_age: Callable[[], float | None] | None = None
+    if map_from is not None:
+        replicator = enter_replica(stack, session, map_from, db_path)
+        recalibrate, allow_empty, map_age = False, True, replicator.map_age_s
     localizer = None
     if not (allow_empty and _has_no_places(db_path)):
         localizer = Localizer(load_map(db_path, localizer_config.detector), localizer_config)
@@ -295,7 +306,10 @@ def enter_localizer_nodes(
     )
     stack.callback(refresher.close)
     stack.callback(subscribe_changes(session, robot_id, refresher.changed).undeclare)
-    return LocalizerNodes(runner, localizer, refresher, homing)
+    if replicator is not None:
+        replicator.on_updated = refresher.changed
+        replicator.start()
+    return LocalizerNodes(runner, localizer, refresher, homing, replicator)
 
 
 def enter_map_node(
@@ -422,20 +436,12 @@ def start_service(
     robot_id = config.robot_id
     with ExitStack() as stack:
         session = stack.enter_context(open_session(config))
-        replicator = None
-        if map_from is not None:
-            replicator = enter_replica(stack, session, map_from, db_path)
-            recalibrate, allow_empty = False, True  # the map's likelihood comes with the map
         if robot is not None:
             enter_robot_node(stack, session, robot_id, robot, limits, camera)
         nodes = enter_localizer_nodes(
             stack, session, robot_id, db_path, policy, localizer_config, limits,
-            refresh_settle_s, recalibrate, allow_empty,
-            None if replicator is None else replicator.map_age_s,
+            refresh_settle_s, recalibrate, allow_empty, map_from,
         )  # fmt: skip
-        if replicator is not None:
-            replicator.on_updated = nodes.refresher.changed
-            replicator.start()
         # last: a place added as soon as it answers is refreshed too
         enter_map_node(
             stack, session, robot_id, db_path, limits, localizer_config, refresh_settle_s,
@@ -450,7 +456,7 @@ def start_service(
             )  # fmt: skip
         yield Service(
             session, config, nodes.runner, nodes.localizer, nodes.refresher, nodes.homing,
-            replicator,
+            nodes.replicator,
         )  # fmt: skip
 
 

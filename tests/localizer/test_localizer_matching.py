@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from localizer.matching import match_descriptors, ratio_test_pairs
+from localizer.matching import (
+    exact_in_float32,
+    match_descriptors,
+    ratio_test_pairs,
+    two_nearest_by_product,
+    two_nearest_opencv,
+)
 
 
 def _descriptors(n: int, seed: int = 0) -> np.ndarray:
@@ -50,3 +56,30 @@ def test_the_ratio_test_keeps_distinct_rows_and_the_closest_claim_of_a_reference
 def test_the_ratio_test_of_no_rows_gives_no_pairs():
     pairs = ratio_test_pairs(np.zeros((0, 2), np.int64), np.zeros((0, 2)), ratio=0.8)
     assert pairs.shape == (0, 2) and pairs.dtype == np.int64
+
+
+def _sift_like(rng: np.random.Generator, n: int, high: int = 256) -> np.ndarray:
+    """Integer-valued float32 rows, as OpenCV's SIFT gives them (and the map stores them)."""
+    return rng.integers(0, high, (n, 128)).astype(np.float32)
+
+
+def test_integer_descriptors_take_the_exact_product_and_match_as_opencv_does():
+    rng = np.random.default_rng(7)
+    for case in range(200):
+        reference = _sift_like(rng, int(rng.integers(2, 60)), high=int(rng.integers(2, 256)))
+        query = _sift_like(rng, int(rng.integers(1, 60)), high=int(rng.integers(2, 256)))
+        if case % 3 == 0:  # ties: repeated rows on both sides, and queries equal to references
+            reference[1::2] = reference[0]
+            query[: len(query) // 2] = reference[rng.integers(0, len(reference))]
+        assert exact_in_float32(query, reference)
+        nearest, distances = two_nearest_opencv(query, reference)
+        np.testing.assert_array_equal(two_nearest_by_product(query, reference)[1], distances)
+        slow = ratio_test_pairs(nearest, distances.astype(np.float64), 0.8)
+        np.testing.assert_array_equal(match_descriptors(query, reference), slow)
+
+
+def test_descriptors_not_exact_in_float32_are_matched_by_opencv():
+    assert not exact_in_float32(_descriptors(5), _descriptors(5))  # fractions
+    big = np.full((2, 128), 300.0, np.float32)  # squared norms summing past 2**24
+    assert not exact_in_float32(big, big)
+    assert exact_in_float32(big[:, :64], big[:, :64])

@@ -17,6 +17,7 @@ from bus_helpers import free_endpoint, make_belief, wait_for
 from click.testing import CliRunner
 from mapdb_helpers import make_fingerprint, new_place
 from test_map_bus import panorama, robot_in
+from test_node_commands import nodes
 
 from localizer.belief import RoomBelief
 from mapdb.database import MapDatabase
@@ -32,6 +33,7 @@ from toploc.bus.schemas import CHANGES_BATCH, MAP_VERSION, SNAPSHOT_CHUNK
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient, MapNode, check_site_map
+from toploc.nodes.robot import RobotNode
 from toploc.replication import MapReplicator
 from toploc.service import start_service
 
@@ -132,6 +134,32 @@ def test_a_place_one_robot_adds_reaches_the_map_and_every_robots_replica(site, t
             assert service.refresher.wait_idle(10.0)
             loaded = service.runner.localizer
             assert loaded is not None and reply["place_id"] in loaded.map.table.place_ids
+
+
+def test_a_localizer_node_keeps_a_replica_of_its_own_beside_the_robots_node(
+    site, tmp_path, monkeypatch
+) -> None:
+    monkeypatch.setenv("TOPLOC_HOME", str(tmp_path / "home"))  # where the replica goes
+    replica = tmp_path / "home" / "replicas" / f"{SITE}.db"
+    robot = robot_in("kitchen", 2.2, 2.9, 75.0)
+    with ExitStack() as stack:
+        session = stack.enter_context(open_session(client_config(site.endpoint, "r1")))
+        stack.enter_context(RobotNode(session, "r1", robot))  # the robot's own process
+        (node,) = stack.enter_context(
+            nodes(("localizer", "--map-from", SITE, "--robot-id", "r1", "--connect", site.endpoint))
+        )
+        assert f"a replica of site map {SITE} at {replica}" in node.output[-1]
+        assert same_rows(replica, site)
+        localizer = LocalizerClient(site.viewer, "r1", timeout_s=5.0, localize_timeout_s=30.0)
+        belief = localizer.localize()
+        assert belief["top"]["room"] == "kitchen" and 0 <= belief["map_age_s"] < 5.0
+        added = site.client.add(encode_png(robot.capture().image), "annex")  # another robot's add
+        assert wait_for(lambda: same_rows(replica, site), 10.0)
+        assert wait_for(
+            lambda: localizer.localize()["best_place"]["place_id"] == added["place_id"], 25.0
+        ), node.output
+        assert "annex" in localizer.belief()["rooms"]
+    assert node.process.returncode == 0 and node.output[-1] == "stopped", node.output
 
 
 def test_offline_the_robot_localizes_from_its_replica_and_catches_up_after(site, tmp_path) -> None:

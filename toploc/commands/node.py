@@ -7,7 +7,8 @@ Ctrl-C (exit status 130) or SIGTERM (0). Each node refuses to start when its rol
 for the robot id (``alive/<role>``). The localizer node reloads its map on the map node's
 ``map/changed``; both read the same SQLite file, so they need the same file (one machine, or
 shared storage). ``node map --map-id`` serves the map to a site's robots, which keep replicas of
-their own (``toploc serve --map-from``, docs/site.md).
+their own (``toploc serve --map-from``, or ``node localizer --map-from`` beside the robot's own
+``node robot``; docs/site.md).
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from localizer.localizer import LocalizerConfig
 from mapdb.errors import MapDatabaseError
 from robot.camera_sources import CameraError
 from robot.p2os_base import P2osError
-from toploc import bus
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import client_bus_config
 from toploc.commands.bus_client import client_options
@@ -32,11 +32,13 @@ from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
     StopSignal,
     camera_option,
+    check_map_id_option,
     check_robot_spec,
     db_option,
     describe_bus,
     long_running,
     map_file,
+    map_from_option,
     node_options,
     node_setup,
     open_capture_source,
@@ -44,6 +46,7 @@ from toploc.commands.options import (
     sim_room_option,
     sim_seed_option,
     sim_world_option,
+    site_replica,
     stop_on_signals,
     stopped,
 )
@@ -202,12 +205,19 @@ def camera_node(
 @node_group.command("localizer")
 @config_file_option
 @long_running
-@db_option(SHARED_MAP, exists=True)
+@db_option(
+    f"{SHARED_MAP} With --map-from: this robot's replica (default "
+    "$TOPLOC_HOME/replicas/MAP_ID.db).",
+    required=False,
+)
+@map_from_option(" (the robot's map/* keys are not served: a site robot records through the "
+                 "site map's keys, or runs toploc serve --map-from)")  # fmt: skip
 @policy_option
 @camera_option
 @node_options
 def localizer_node(
-    db_path: Path,
+    db_path: Path | None,
+    map_from: str | None,
     policy: str,
     camera: str,
     robot_id: str,
@@ -218,15 +228,24 @@ def localizer_node(
     limits_path: Path | None,
 ) -> None:
     """The localizer and homing nodes, driving the bus's robot node, until interrupted."""
+    if map_from is None and db_path is None:
+        raise click.UsageError("Missing option '--db' (or --map-from MAP_ID: a site map's replica)")
+    if map_from is None and db_path is not None and not db_path.exists():
+        raise click.BadParameter(f"map {db_path} does not exist", param_hint="--db")
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
+    map_path = db_path if map_from is None else site_replica(map_from, db_path)
+    assert map_path is not None
 
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
         refresher.append(enter_localizer_nodes(
-            stack, session, robot_id, db_path, policy, localizer_config, limits,
-            allow_empty=True,
+            stack, session, robot_id, map_path, policy, localizer_config, limits,
+            allow_empty=True, map_from=map_from,
         ).refresher)  # fmt: skip
-        return f"{db_path} (reloaded on map/changed), driving the bus's robot node"
+        if map_from is not None:
+            return (f"a replica of site map {map_from} at {map_path} (reloaded as it takes the "
+                    "map's changes), driving the bus's robot node")  # fmt: skip
+        return f"{map_path} (reloaded on map/changed), driving the bus's robot node"
 
     refresher: list[MapRefresher] = []
     with ExitStack() as stack:
@@ -244,6 +263,7 @@ def localizer_node(
     "map_id",
     metavar="MAP_ID",
     default=None,
+    callback=check_map_id_option,
     help="Serve the map as site map MAP_ID for every robot on the bus (keys toploc/map/MAP_ID/; "
     "robots run toploc serve --map-from MAP_ID with replicas of their own; docs/site.md). A "
     "map not yet served under a name takes this one.",
@@ -273,12 +293,6 @@ def map_node(
     """The map node (map/*; publishes map/changed after each write) until interrupted."""
     config, limits = node_setup(robot_id, listen, connect, mode, zenoh_file, limits_path, False)
     localizer_config = LocalizerConfig(camera=parse_camera(camera))
-
-    if map_id is not None:
-        try:
-            bus.check_map_id(map_id)
-        except ValueError as error:
-            raise click.BadParameter(str(error), param_hint="--map-id") from None
 
     def enter(stack: ExitStack, session: zenoh.Session, limits: Limits) -> str:
         enter_map_node(stack, session, robot_id, db_path, limits, localizer_config)

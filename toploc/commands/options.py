@@ -20,9 +20,16 @@ from localizer.robot_protocol import Camera
 from mapdb.database import MapDatabase
 from mapdb.errors import MapDatabaseError
 from robot.worlds import WORLD_NAMES
-from toploc.bus import DEFAULT_ENDPOINT, BusConfig, check_robot_id, default_robot_id
+from toploc.bus import (
+    DEFAULT_ENDPOINT,
+    BusConfig,
+    check_map_id,
+    check_robot_id,
+    default_robot_id,
+)
 from toploc.bus.config import bus_config, exposure_warning
 from toploc.limits import Limits, load_limits
+from toploc.maps import cache_dir
 
 if TYPE_CHECKING:
     from toploc.service import MapRefresher
@@ -285,6 +292,41 @@ def db_option(help: str, required: bool = True, exists: bool = False) -> Any:
         type=click.Path(dir_okay=False, exists=exists, path_type=Path),
         help=help,
     )
+
+
+def check_map_id_option(
+    _ctx: click.Context, _param: click.Parameter, value: str | None
+) -> str | None:
+    """A ``--map-id`` or ``--map-from`` value: a site map's id (one key chunk), or None."""
+    if value is None:
+        return None
+    try:
+        return check_map_id(value)
+    except ValueError as error:
+        raise click.BadParameter(str(error)) from None
+
+
+def map_from_option(more_help: str = "") -> Any:
+    """The ``--map-from MAP_ID`` option (the ``map_from`` parameter; None when not given) of a
+    command whose localizer runs on a replica of a site map (:func:`site_replica`)."""
+    return click.option(
+        "--map-from",
+        "map_from",
+        metavar="MAP_ID",
+        default=None,
+        callback=check_map_id_option,
+        help="Localize on a replica of site map MAP_ID (served by toploc node map --map-id MAP_ID "
+        "anywhere on the bus; docs/site.md): --db is this robot's replica (default "
+        "$TOPLOC_HOME/replicas/MAP_ID.db), made from the map's snapshot and kept current"
+        + more_help
+        + ".",
+    )
+
+
+def site_replica(map_from: str, db_path: Path | None) -> Path:
+    """The file of a site robot's replica of site map ``map_from``: ``--db`` if given, else
+    ``$TOPLOC_HOME/replicas/<map_from>.db``."""
+    return db_path or cache_dir() / "replicas" / f"{map_from}.db"
 
 
 @contextmanager

@@ -23,18 +23,19 @@ from localizer.localizer import LocalizerConfig
 from localizer.robot_protocol import Camera
 from mapdb.errors import MapDatabaseError
 from robot.p2os_base import P2osError
-from toploc import bus
 from toploc.bus import BusConfig, BusError, open_session
 from toploc.bus.config import ROS2_LISTEN_ENDPOINT
 from toploc.commands.config_file import config_file_option
 from toploc.commands.options import (
     StopSignal,
     camera_option,
+    check_map_id_option,
     check_robot_spec,
     db_option,
     describe_bus,
     long_running,
     map_file,
+    map_from_option,
     node_options,
     node_setup,
     open_capture_source,
@@ -42,6 +43,7 @@ from toploc.commands.options import (
     sim_room_option,
     sim_seed_option,
     sim_world_option,
+    site_replica,
     stop_on_signals,
     stopped,
 )
@@ -52,7 +54,7 @@ from toploc.commands.ros2_options import (
     ros2_setup,
 )
 from toploc.limits import Limits
-from toploc.maps import cache_dir, ensure_world_map
+from toploc.maps import ensure_world_map
 from toploc.nodes.ros2 import Ros2Settings
 from toploc.nodes.sim_truth import subscribe_true_pose
 from toploc.robots import ROBOT_SPECS, open_served_robot
@@ -73,21 +75,13 @@ from toploc.service import MapRefresher, enter_replica, enter_ros2_bridge, start
     is_flag=True,
     help="Create the --db file as an empty map if it does not exist.",
 )
-@click.option(
-    "--map-from",
-    "map_from",
-    metavar="MAP_ID",
-    default=None,
-    help="Localize on a replica of site map MAP_ID (served by toploc node map --map-id MAP_ID "
-    "anywhere on the bus; docs/site.md): --db is this robot's replica (default "
-    "$TOPLOC_HOME/replicas/MAP_ID.db), made from the map's snapshot and kept current; "
-    "map/add goes to the site map.",
-)
+@map_from_option("; map/add goes to the site map")
 @click.option(
     "--map-id",
     "map_id",
     metavar="MAP_ID",
     default=None,
+    callback=check_map_id_option,
     help="Also serve the --db map as site map MAP_ID to other robots (toploc/map/MAP_ID/; they "
     "run serve --map-from MAP_ID): the map host is a robot too. toploc node map --map-id "
     "serves it without a robot.",
@@ -193,19 +187,12 @@ def serve(
             config = replace(config, listen=(ROS2_LISTEN_ENDPOINT,), connect=ros[0].connect)
             click.echo(f"toploc bus: through the ROS router at {', '.join(ros[0].connect)}")
         check_ports_apart(config, ros[0])
-    for option, value in (("--map-from", map_from), ("--map-id", map_id)):
-        if value is None:
-            continue
-        try:
-            bus.check_map_id(value)
-        except ValueError as error:
-            raise click.BadParameter(str(error), param_hint=option) from None
     if map_id is not None and (map_from is not None or db_path is None):
         raise click.UsageError("--map-id serves the --db map (not a replica: no --map-from)")
     if map_from is not None:
         if new_map:
             raise click.UsageError("--new-map and --map-from: a replica is made from the site map")
-        replica = db_path or cache_dir() / "replicas" / f"{map_from}.db"
+        replica = site_replica(map_from, db_path)
         with ExitStack() as stack:
             capture_from = open_capture_source(stack, source)
             if not replica.exists():
