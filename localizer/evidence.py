@@ -35,6 +35,13 @@ MOTIONS: tuple[str, ...] = ("auto", "general", "planar")
 COVERAGE_ARC_DEG = 30.0
 """Each inlier covers this arc of the query's horizon, centred on its azimuth (degrees)."""
 
+ALL_ROUND_COVERAGE = 0.6
+"""A place whose inliers cover at least this share of the query's horizon is seen all round:
+the query stands in its room. A room seen through a door or an opening covers half the
+horizon or less (a recorded ``building`` map: the corridor's one place from just inside an
+office, 0.35 and 0.51; the bare house mapped one place per room: a bedroom from the hall and
+the hall from a bedroom, 0.51 and 0.52; the living room on a bedroom's view, 0.25)."""
+
 
 def azimuth_coverage(rays: np.ndarray, arc_deg: float = COVERAGE_ARC_DEG) -> float:
     """The share of the horizon (0 to 1) within ``arc_deg / 2`` of the azimuth of one of

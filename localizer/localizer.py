@@ -318,7 +318,22 @@ class Localizer:
             stamp_s=time.time(),
             count=self.likelihood.count,
         )
+        localized = belief.state is LocalizationState.LOCALIZED
+        if state is None and localized and not self._seen_all_round(belief.top[0]):
+            state = LocalizationState.AMBIGUOUS
         return belief if state is None else belief.with_state(state)
+
+    def _seen_all_round(self, room: str) -> bool:
+        """Whether ``room`` has two places or more, or the latest frame's inliers with its one
+        place cover at least ``one_place_min_coverage`` of the horizon (see
+        :class:`~localizer.belief.StateThresholds`: a one-place room seen through a door)."""
+        if self.map.places_per_room[room] >= 2 or self.latest is None:
+            return True
+        coverage = max(
+            (item.coverage for item in self.latest.evidence.places if item.room == room),
+            default=0.0,
+        )
+        return coverage >= self.config.thresholds.one_place_min_coverage
 
     def _thresholds(self, probabilities: np.ndarray) -> StateThresholds:
         """The configured thresholds with the likelihood's lost test, and the stricter

@@ -151,3 +151,30 @@ def test_a_room_of_one_place_must_win_by_more_to_be_localized(top_room: str, sta
     belief = localizer.reset({top_room: 15.0, other: 1.0})  # 15 to 1: between 10 and 20
     assert belief.state is LocalizationState(state)
     assert localizer.map.places_per_room == {"attic": 1, "cellar": 2}
+
+
+def frame_seeing(localizer: Localizer, place_id: int, room: str, coverage: float):
+    """An observation whose only evidence is ``place_id`` at 60 inliers over ``coverage`` of
+    the horizon."""
+    from localizer.evidence import PlaceEvidence, QueryEvidence
+    from localizer.localizer import Observation
+
+    pairs = np.zeros((60, 2), dtype=np.int64)
+    item = PlaceEvidence(place_id, room, 80, 60, 0.0, pairs, coverage)
+    fingerprint = localizer.map.fingerprint(place_id)
+    return Observation(fingerprint, QueryEvidence((item,), {}), {})
+
+
+@pytest.mark.parametrize(("coverage", "state"), [(0.9, "localized"), (0.4, "ambiguous")])
+def test_a_room_of_one_place_seen_on_part_of_the_horizon_is_not_localized(coverage, state):
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"attic": 100.0, "cellar": 1.0})  # sure enough for a one-place room
+    localizer.latest = frame_seeing(localizer, 1, "attic", coverage)
+    assert localizer.belief().state is LocalizationState(state)
+
+
+def test_a_room_of_two_places_is_localized_whatever_the_coverage():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"cellar": 100.0, "attic": 1.0})
+    localizer.latest = frame_seeing(localizer, 2, "cellar", 0.3)
+    assert localizer.belief().state is LocalizationState.LOCALIZED
