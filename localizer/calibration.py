@@ -130,9 +130,11 @@ def calibrate(
     prior: RatioLikelihood | None = None,
     on_query: Callable[[], None] | None = None,
     max_queries: int = MAX_QUERIES,
+    declared: Sequence[tuple[str, str]] = (),
 ) -> tuple[RatioLikelihood, CalibrationSamples]:
     """The likelihood fitted on ``loaded``'s leave-one-out evidence, and the samples it was
-    fitted on. ``on_query`` is called after each query (for a progress bar).
+    fitted on. ``on_query`` is called after each query (for a progress bar). ``declared``:
+    look-alike pairs the user named, kept whatever the leave-one-out finds.
 
     With ``params.motion`` ``"auto"`` (the default) the leave-one-out runs with both relative
     pose models and keeps the one whose counts separate the rooms better
@@ -145,7 +147,7 @@ def calibrate(
     fits = []
     for motion in motions:
         model, samples = _calibrate_with(
-            loaded, replace(params, motion=motion), prior, on_query, max_queries
+            loaded, replace(params, motion=motion), prior, on_query, max_queries, declared
         )
         fits.append((separation(samples), replace(model, motion=motion), samples))
     _, model, samples = max(fits, key=lambda fit: fit[0])  # ties: general, the first
@@ -172,6 +174,7 @@ def _calibrate_with(
     prior: RatioLikelihood | None,
     on_query: Callable[[], None] | None,
     max_queries: int,
+    declared: Sequence[tuple[str, str]] = (),
 ) -> tuple[RatioLikelihood, CalibrationSamples]:
     room_sizes = Counter(loaded.table.rooms)
     queries = []
@@ -180,7 +183,7 @@ def _calibrate_with(
         queries.append(query)
         if on_query is not None:
             on_query()
-    samples = _samples(loaded, queries, room_sizes)
+    samples = _samples(loaded, queries, room_sizes, declared)
     if samples.unasked_lookalikes:
         # a map of more rooms than queries: ask the rooms some query found nearly as good as
         # its own, so that a pair of twins is judged from both sides
@@ -188,8 +191,10 @@ def _calibrate_with(
         extra = [first_place[room] for room in samples.unasked_lookalikes[:max_queries]]
         for query in leave_one_out(loaded, params, count=count, places=sorted(extra)):
             queries.append(query)
-        samples = _samples(loaded, queries, room_sizes)
+        samples = _samples(loaded, queries, room_sizes, declared)
     model = fit_ratio_likelihood(samples, prior)
+    told = tuple(sorted({(min(a, b), max(a, b)) for a, b in declared}))
+    model = replace(model, declared=told)
     if not samples.lookalike_pairs:
         return model, samples
     counterparts = counterpart_pairs(loaded, queries, samples.lookalike_pairs)
@@ -209,7 +214,10 @@ def best_matches(query: LeftOut) -> dict[str, tuple[int, int]]:
 
 
 def _samples(
-    loaded: LoadedMap, queries: Sequence[LeftOut], room_sizes: Counter[str]
+    loaded: LoadedMap,
+    queries: Sequence[LeftOut],
+    room_sizes: Counter[str],
+    declared: Sequence[tuple[str, str]],
 ) -> CalibrationSamples:
     """The calibration samples of ``queries``, with the rooms each view finds alike by their
     descriptors (:func:`localizer.lookalikes.alike_by_appearance`)."""
@@ -217,5 +225,5 @@ def _samples(
         alike_by_appearance(q.room, best_matches(q), room_sizes, loaded.edges) for q in queries
     ]
     return CalibrationSamples.from_queries(
-        ((q.room, q.counts) for q in queries), room_sizes, alike=alike
+        ((q.room, q.counts) for q in queries), room_sizes, alike=alike, declared=declared
     )

@@ -128,7 +128,9 @@ class RatioLikelihood:
     ``count``: what is counted of each place (:data:`COUNTS`); a model stored before the
     coverage existed reads ``inliers``. ``lookalikes``: the pairs of look-alike rooms the
     leave-one-out found, ``counterparts``: the pairs of their places (ids) at the same spot of
-    both (:mod:`localizer.lookalikes`; both empty for a model stored before them).
+    both (:mod:`localizer.lookalikes`; both empty for a model stored before them);
+    ``declared``: the pairs the user said look alike (``toploc map lookalike``), always among
+    ``lookalikes`` and kept by every calibration.
 
     The defaults (used for a map that cannot be calibrated: fewer than two places in every room,
     and the prior the fit is pulled towards) are the fit on the bare rendered ``house`` (35
@@ -159,6 +161,7 @@ class RatioLikelihood:
     count: str = "spread"
     lookalikes: tuple[tuple[str, str], ...] = ()
     counterparts: tuple[tuple[int, int], ...] = ()
+    declared: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if self.count not in COUNTS:
@@ -216,6 +219,7 @@ class RatioLikelihood:
             "count": self.count,
             "lookalikes": [list(pair) for pair in self.lookalikes],
             "counterparts": [list(pair) for pair in self.counterparts],
+            "declared_lookalikes": [list(pair) for pair in self.declared],
         }
 
     @classmethod
@@ -238,6 +242,9 @@ class RatioLikelihood:
                 count=str(data.get("count", "inliers")),
                 lookalikes=tuple((str(a), str(b)) for a, b in list(data.get("lookalikes", []))),
                 counterparts=tuple((int(a), int(b)) for a, b in list(data.get("counterparts", []))),
+                declared=tuple(
+                    (str(a), str(b)) for a, b in list(data.get("declared_lookalikes", []))
+                ),
             )
         except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f"bad stored likelihood {dict(data)}: {error}") from error
@@ -296,6 +303,7 @@ class CalibrationSamples:
         pair_min_inliers: float = 8.0,
         pair_chance_factor: float = 4.0,
         alike: Sequence[Collection[str]] = (),
+        declared: Iterable[tuple[str, str]] = (),
     ) -> CalibrationSamples:
         """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
         per room) says whether the query's room had another place to match.
@@ -311,8 +319,9 @@ class CalibrationSamples:
         twin test (``lookalike_fraction``): a room recorded at places a metre apart explains
         its own views better than the twin does (office_a 209 spread inliers, office_b 110 on a
         map recorded with three places per office, every other room at most 13), yet the twin
-        explains every one of them. A pair's counts in each other's views are never chance
-        counts, however low (its places far from the view's spot)."""
+        explains every one of them. Pairs the user ``declared`` are pairs whatever the
+        views say (rooms the map lacks left out). A pair's counts in each other's views are
+        never chance counts, however low (its places far from the view's spot)."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
         asked: Counter[str] = Counter()
@@ -330,7 +339,13 @@ class CalibrationSamples:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only
         # the views near it (on the dense house, hall and living room against the bedrooms)
-        pairs = mutual_pairs(flagged, asked)
+        told = {(min(a, b), max(a, b)) for a, b in declared if a != b}
+        pairs = tuple(
+            sorted(
+                set(mutual_pairs(flagged, asked))
+                | {(a, b) for a, b in told if a in room_sizes and b in room_sizes}
+            )
+        )
         paired = {frozenset(pair) for pair in pairs}
         same: list[float] = []
         other: list[float] = []

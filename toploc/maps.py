@@ -112,12 +112,27 @@ def check_detector(db_path: Path | str, detector: str) -> None:
 
 
 def calibrate_map(
-    db_path: Path | str, detector: str = "sift", progress: bool = False
+    db_path: Path | str,
+    detector: str = "sift",
+    progress: bool = False,
+    declare: tuple[str, str] | None = None,
 ) -> RatioLikelihood:
     """Fit the likelihood of ``detector``'s evidence on the map's own places (leave-one-out,
-    :mod:`localizer.calibration`) and store it in the map; returns it. Raises ``ValueError`` if
-    the map has no ``detector`` fingerprint."""
+    :mod:`localizer.calibration`) and store it in the map; returns it. The look-alike pairs the
+    user declared (the stored likelihood's, and ``declare``: one more) are kept. Raises
+    ``ValueError`` if the map has no ``detector`` fingerprint, or if ``declare`` names a room
+    the map lacks or the same room twice."""
     loaded = load_map(db_path, detector)
+    declared = list(loaded.likelihood.declared) if loaded.likelihood is not None else []
+    if declare is not None:
+        missing = [room for room in declare if room not in loaded.rooms]
+        if missing or declare[0] == declare[1]:
+            why = f"no room {missing[0]!r}" if missing else "one room twice"
+            raise ValueError(
+                f"cannot declare {declare[0]} and {declare[1]} look-alikes in {db_path}: {why} "
+                f"(its rooms: {', '.join(loaded.rooms)})"
+            )
+        declared.append(declare)
     queries = min(MAX_QUERIES, len(loaded.table.place_ids))
     total = queries * len(motions_to_try(EvidenceParams()))
     with tqdm(total=total, desc=f"calibrate {detector}", unit="query", disable=not progress) as bar:
@@ -125,7 +140,7 @@ def calibrate_map(
         def tick() -> None:
             bar.update(1)
 
-        likelihood, _ = calibrate(loaded, on_query=tick)
+        likelihood, _ = calibrate(loaded, on_query=tick, declared=declared)
     with MapDatabase.open(db_path, create=False) as map_db:
         map_db.set_likelihood(detector, likelihood.to_json())
     return likelihood

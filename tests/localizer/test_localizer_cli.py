@@ -224,3 +224,27 @@ def test_localize_of_a_frame_matching_no_place_says_lost_and_names_no_room(build
     first = result.output.splitlines()[0]
     assert first.startswith("lost: no room of the map matches (best ")
     assert " 1.000" not in result.output.split("best places")[0]
+
+
+def test_rooms_declared_look_alike_stay_so_through_later_calibrations(building_map, tmp_path):
+    from toploc.maps import calibrate_map, load_map
+
+    db_path = tmp_path / "map.db"
+    shutil.copy(building_map[0], db_path)
+    assert ("kitchen", "storage") not in load_map(db_path).likelihood.lookalikes
+    result = run("map", "lookalike", "storage", "kitchen", "--db", db_path, "--no-progress")
+    assert result.exit_code == 0, result.output
+    assert "declared look-alikes: storage and kitchen" in result.output
+    assert "kitchen ~ storage" in result.output
+    calibrate_map(db_path, "sift")  # as map add does after a new place
+    model = load_map(db_path).likelihood
+    assert model.declared == (("kitchen", "storage"),)
+    assert ("kitchen", "storage") in model.lookalikes
+
+
+def test_a_look_alike_of_a_room_the_map_lacks_is_refused_by_name(building_map, tmp_path):
+    db_path = tmp_path / "map.db"
+    shutil.copy(building_map[0], db_path)
+    result = run("map", "lookalike", "kitchen", "attic", "--db", db_path, "--no-progress")
+    assert result.exit_code == 1
+    assert "no room 'attic'" in result.output and "kitchen" in result.output

@@ -324,3 +324,17 @@ def test_a_room_below_half_the_own_rooms_matches_does_not_look_alike():
     matches = {"hall": (119, 80), "bedroom_a": (24, 4), "kitchen": (22, 3), "study": (21, 3)}
     sizes = {"hall": 3, "bedroom_a": 3, "kitchen": 3, "study": 3}
     assert alike_by_appearance("hall", matches, sizes) == frozenset()
+
+
+def test_declared_look_alikes_are_a_pair_whatever_the_views_say():
+    from localizer.likelihood import CalibrationSamples
+
+    sizes = {"office_a": 2, "office_b": 2, "kitchen": 2}
+    queries = [
+        ("office_a", {"office_a": 150.0, "office_b": 9.0, "kitchen": 3.0}),
+        ("office_b", {"office_b": 140.0, "office_a": 4.0, "kitchen": 2.0}),
+    ]
+    assert CalibrationSamples.from_queries(queries, sizes).lookalike_pairs == ()
+    told = CalibrationSamples.from_queries(queries, sizes, declared=[("office_b", "office_a")])
+    assert told.lookalike_pairs == (("office_a", "office_b"),)
+    assert sorted(told.other_room) == [2.0, 3.0]  # the twins' counts are no chance samples

@@ -410,6 +410,42 @@ def _calibrate(
             click.echo(f"  {detector} likelihood: {describe_likelihood(model)}")
 
 
+@map_group.command("lookalike")
+@click.argument("room_a")
+@click.argument("room_b")
+@map_db_option
+@click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
+def lookalike_command(room_a: str, room_b: str, db_path: Path, progress: bool) -> None:
+    """Declare that ROOM_A and ROOM_B look alike (two identical offices), and calibrate again.
+
+    The calibration finds look-alike rooms only where their places show it; twins whose places
+    were recorded at different spots of their identical frames can look like two rooms. A
+    declared pair is weighed as equally likely wherever the frame cannot tell them apart, and
+    is kept by every later calibration (docs/localization.md).
+    """
+    from localizer.features import params_from_preset
+    from toploc.maps import calibrate_map
+
+    with _map_errors():
+        if not db_path.is_file():
+            raise click.ClickException(f"map database {db_path} does not exist")
+        with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+            held = sorted(map_db.info().fingerprints_per_detector)
+        if not held:
+            raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
+        for preset in parse_detectors(",".join(held)):
+            detector = params_from_preset(preset).detector
+            try:
+                model = calibrate_map(db_path, detector, progress, declare=(room_a, room_b))
+            except ValueError as error:
+                raise click.ClickException(str(error)) from error
+            with MapDatabase.open(db_path, readonly=True) as map_db:
+                room_of = {place.id: place.room for place in map_db.places()}
+            click.echo(f"declared look-alikes: {room_a} and {room_b}")
+            for line in lookalike_lines(model, room_of):
+                click.echo(line)
+
+
 @map_group.command("connect")
 @click.argument("room_a")
 @click.argument("room_b")
