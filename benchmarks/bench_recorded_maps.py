@@ -20,7 +20,8 @@ world seeds 4 and 5 (record seeds 5 and 6) (docs/results.md). World seeds 6 and 
 been looked at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
-        [--trials 20] [--record-seed 0] [--world-seed 0] [--json out.json]
+        [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised]
+        [--json out.json]
 """
 
 from __future__ import annotations
@@ -47,6 +48,13 @@ SHORT = {
 }
 
 
+TWINS: dict[str, tuple[tuple[str, str], ...]] = {
+    "building": (("office_a", "office_b"),),
+    "house": (("bedroom_a", "bedroom_b"), ("bathroom_a", "bathroom_b")),
+}
+"""The look-alike rooms of each world, as a user who knows them declares them (``--declared``)."""
+
+
 def first_outcome(trial: Trial) -> str:
     """The outcome of the trial's first look (before any drive)."""
     first = trial.result.first
@@ -56,18 +64,28 @@ def first_outcome(trial: Trial) -> str:
 
 
 def recorded_db(
-    cache: Path, world: str, world_seed: int, places: int, record_seed: int, advised: bool
+    cache: Path,
+    world: str,
+    world_seed: int,
+    places: int,
+    record_seed: int,
+    advised: bool,
+    declared: bool = False,
 ) -> Path:
     """The cached recorded map (recorded if missing), calibrated again by the code being
-    measured; ``advised``: then two places at the same two spots of each look-alike pair's
-    rooms, as ``toploc map info`` advises."""
-    name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{'-advised' if advised else ''}"
+    measured; ``declared``: then the world's twins (:data:`TWINS`) declared as ``toploc map
+    lookalike`` does; ``advised``: then two places at the same two spots of each look-alike
+    pair's rooms, as ``toploc map info`` advises."""
+    suffix = ("-declared" if declared else "") + ("-advised" if advised else "")
+    name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{suffix}"
     db = cache / name / "map.db"
     start = time.perf_counter()
     if not db.exists():
         db.parent.mkdir(parents=True, exist_ok=True)
         scene = make_world(world, world_seed)
         record_map(scene, places, record_seed, db, progress=True)
+        for pair in TWINS[world] if declared else ():
+            calibrate_map(db, declare=pair)
         if advised:
             loaded = load_map(db)
             if loaded.likelihood is not None:
@@ -86,7 +104,13 @@ def recorded_db(
 
 def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]:
     db = recorded_db(
-        Path(args.cache_dir), world, args.world_seed, places, args.record_seed, args.advised
+        Path(args.cache_dir),
+        world,
+        args.world_seed,
+        places,
+        args.record_seed,
+        args.advised,
+        args.declared,
     )
 
     def show(trial: Trial) -> None:
@@ -155,6 +179,11 @@ def main() -> None:
         action="store_true",
         help="after recording, two more places at two spots of each look-alike pair's rooms",
     )
+    parser.add_argument(
+        "--declared",
+        action="store_true",
+        help="after recording, the world's twins declared (toploc map lookalike)",
+    )
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args()
     worlds = args.worlds.split(",")
@@ -173,6 +202,7 @@ def main() -> None:
     print(
         f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "
         f"{args.trials} kidnappings each, policy {args.policy}"
+        f"{', twins declared' if args.declared else ''}"
         f"{', advised (2 counterpart places per look-alike pair)' if args.advised else ''}"
     )
     print_table(rows)
