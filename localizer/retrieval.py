@@ -10,7 +10,8 @@ in one place only is distinctive; one seen everywhere says little), and neighbou
 vote total divided by ``sqrt(n_keypoints / mean_keypoints)`` so that richly textured places do not
 win on the count of their chance hits. The ``k`` best scores are the shortlist.
 
-:class:`CompactPlaceIndex` votes the same way over product-quantised codes (faiss IVF-PQ), and
+:class:`CompactPlaceIndex` votes the same way over product-quantised codes (faiss IVF-PQ, fast-scan
+4-bit codes by default), and
 its ids are the place indices, so it holds no descriptor and no per-keypoint row: about 24 bytes
 per map keypoint (16 bytes of code and faiss's 8-byte id) against the 512 bytes of a float32
 descriptor plus FLANN's forest. Its coarse quantiser and codebooks are trained once on a
