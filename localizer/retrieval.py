@@ -10,7 +10,8 @@ in one place only is distinctive; one seen everywhere says little), and neighbou
 vote total divided by ``sqrt(n_keypoints / mean_keypoints)`` so that richly textured places do not
 win on the count of their chance hits. The ``k`` best scores are the shortlist.
 
-:class:`CompactPlaceIndex` votes the same way over product-quantised codes (faiss IVF-PQ), and
+:class:`CompactPlaceIndex` votes the same way over product-quantised codes (faiss IVF-PQ, fast-scan
+4-bit codes by default), and
 its ids are the place indices, so it holds no descriptor and no per-keypoint row: about 24 bytes
 per map keypoint (16 bytes of code and faiss's 8-byte id) against the 512 bytes of a float32
 descriptor plus FLANN's forest. Its coarse quantiser and codebooks are trained once on a
@@ -217,8 +218,11 @@ class CompactParams:
     """IVF-PQ and voting settings of a :class:`CompactPlaceIndex`.
 
     ``lists``: inverted lists of the coarse quantiser (None: from the training sample, see
-    :func:`lists_for`); ``subquantizers`` x 8 bits: bytes per code (16 here: a SIFT descriptor
-    in 16 bytes); ``probes``: lists searched per query descriptor (8: at 10,000 places of
+    :func:`lists_for`); ``subquantizers`` x ``bits``: the bits per code (32 x 4 here: a SIFT
+    descriptor in 16 bytes). ``bits=4`` is faiss's fast-scan PQ (``IndexIVFPQFastScan``), whose
+    lists are scanned with SIMD lookups in registers; ``bits=8`` the plain IVF-PQ of table
+    lookups (``PQ16x8``: the same 16 bytes; ``docs/speed.md`` has both measured); ``probes``:
+    lists searched per query descriptor (8: at 10,000 places of 8-bit codes,
     ``bench_big_maps.py --probes`` 194 ms a query against 355 ms with 16, the same top-1, 95 %
     of the shortlist the same; 4: 113 ms, 89 %); ``neighbours`` and
     ``max_distance_ratio`` as :class:`IndexParams`' (on the codes' approximate distances);
@@ -228,7 +232,8 @@ class CompactParams:
     """
 
     lists: int | None = None
-    subquantizers: int = 16
+    subquantizers: int = 32
+    bits: int = 4
     probes: int = 8
     neighbours: int = 8
     max_distance_ratio: float = 1.25
@@ -242,6 +247,14 @@ class CompactParams:
                              f"threads must be >= 1, got {self}")  # fmt: skip
         if not self.max_distance_ratio >= 1:
             raise ValueError(f"max_distance_ratio must be >= 1, got {self.max_distance_ratio!r}")
+        if self.bits not in (4, 8):
+            raise ValueError(f"bits must be 4 (fast scan) or 8, got {self.bits!r}")
+
+    @property
+    def factory(self) -> str:
+        """The faiss ``index_factory`` string of these settings (``lists`` must be set)."""
+        codes = f"PQ{self.subquantizers}x4fs" if self.bits == 4 else f"PQ{self.subquantizers}x8"
+        return f"IVF{self.lists}_HNSW32,{codes}"
 
 
 MAX_LISTS = 4096
@@ -298,13 +311,12 @@ class CompactPlaceIndex:
             most = max(MIN_LISTS, len(sample) // params.train_per_list)
             params = replace(params, lists=min(lists_for(n_descriptors or len(sample)), most))
         faiss.omp_set_num_threads(1)  # see :meth:`search`
-        index = faiss.index_factory(
-            sample.shape[1], f"IVF{params.lists}_HNSW32,PQ{params.subquantizers}x8"
-        )
+        index = faiss.index_factory(sample.shape[1], params.factory)
         # Polysemous training (codes ordered for Hamming filtering, which voting does not use)
         # took 30 times as long as the rest: 87 s for 3,000 descriptors here.
         ivf_pq: Any = faiss.downcast_index(faiss.extract_index_ivf(index))
-        ivf_pq.do_polysemous_training = False
+        if hasattr(ivf_pq, "do_polysemous_training"):
+            ivf_pq.do_polysemous_training = False
         index.train(sample)
         return cls(index, np.zeros(0, dtype=np.int64), params)
 
@@ -410,8 +422,13 @@ class CompactPlaceIndex:
             raise ValueError(
                 f"compact place index holds {index.ntotal} codes, its places {counts.sum()}"
             )
-        params = params or CompactParams()
-        return cls(index, counts, replace(params, lists=int(faiss.extract_index_ivf(index).nlist)))
+        ivf: Any = faiss.downcast_index(faiss.extract_index_ivf(index))
+        layout = {
+            "lists": int(ivf.nlist),
+            "subquantizers": int(ivf.pq.M),
+            "bits": int(ivf.pq.nbits),
+        }
+        return cls(index, counts, replace(params or CompactParams(), **layout))
 
 
 def training_size(n_descriptors: int, params: CompactParams | None = None) -> int:

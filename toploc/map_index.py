@@ -39,8 +39,9 @@ from mapdb.store import SqlitePlaceStore
 
 _log = logging.getLogger(__name__)
 
-FORMAT = 1
-"""The cache file's layout version (a file of another is stale)."""
+FORMAT = 2
+"""The cache file's layout version (a file of another is stale): 1 held 8-bit PQ codes
+(``PQ16x8``), 2 fast-scan 4-bit ones (``PQ32x4fs``, :class:`~localizer.retrieval.CompactParams`)."""
 
 REBUILD_GROWTH = 4
 """Rebuild when :func:`~localizer.retrieval.lists_for` the grown map is this many times the

@@ -217,6 +217,8 @@ def test_compact_index_refuses_bad_input(trained) -> None:
         index.shortlist(np.zeros((3, 64), np.float32), 1)
     with pytest.raises(ValueError, match="probes"):
         CompactParams(probes=0)
+    with pytest.raises(ValueError, match="bits must be 4"):
+        CompactParams(bits=6)
     assert lists_for(10_000_000) == 4096 and lists_for(100) == 16
 
 
@@ -233,3 +235,25 @@ def test_compact_shortlist_contains_brute_force_winner(corridor) -> None:
         indexed = place_evidence(query, table, params, index)
         assert indexed.best is not None and indexed.best.place_id == brute.best.place_id
         assert indexed.best.inliers == brute.best.inliers
+
+
+@pytest.mark.parametrize("bits, subquantizers", [(4, 32), (8, 16)])
+def test_both_code_layouts_shortlist_the_planted_place_and_read_back_as_stored(
+    bits: int, subquantizers: int
+) -> None:
+    rng = np.random.default_rng(11)
+    params = CompactParams(subquantizers=subquantizers, bits=bits)
+    index = CompactPlaceIndex.train(rng.random((3000, 128), np.float32), params)
+    table = random_table(rng, [100, 150, 80, 120] * 2)
+    index.add_places([table.fingerprint(i).descriptors for i in range(8)])
+    for place in range(8):
+        rows = table.fingerprint(place).descriptors[::2]
+        assert (
+            index.shortlist(rows + rng.normal(0, 0.01, rows.shape).astype(np.float32), 2)[0]
+            == place
+        )
+    # Read with the default settings, the index keeps the layout it was stored with.
+    copy = CompactPlaceIndex.from_bytes(index.to_bytes(), index.keypoint_counts)
+    assert (copy.params.bits, copy.params.subquantizers) == (bits, subquantizers)
+    query = table.descriptors[::3]
+    np.testing.assert_array_equal(copy.scores(query), index.scores(query))

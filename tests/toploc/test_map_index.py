@@ -4,6 +4,7 @@ gives the evidence it gives on the map in memory."""
 
 from __future__ import annotations
 
+import json
 import logging
 import shutil
 from pathlib import Path
@@ -18,7 +19,7 @@ from localizer.localizer import Localizer, LocalizerConfig
 from mapdb.database import MapDatabase
 from mapdb.dataset import read_manifest
 from mapdb.store import SqlitePlaceStore
-from toploc.map_index import compact_index, index_path, refresh_index_files
+from toploc.map_index import FORMAT, compact_index, index_path, refresh_index_files
 from toploc.maps import load_map
 
 
@@ -98,6 +99,22 @@ def test_an_index_file_of_other_places_is_stale_and_built_again(big_map: Path, t
     index, report = compact_index(store)
     assert report.action == "built" and report.why.startswith("stale")
     assert index.shortlist(own_view(store, 4), 1)[0] == 4
+
+
+def test_an_index_file_of_an_earlier_layout_is_said_and_built_again(big_map: Path, caplog) -> None:
+    compact_index(SqlitePlaceStore.open(big_map, "sift"))
+    path = index_path(big_map, "sift")
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["header"] = np.array(json.dumps({"format": FORMAT - 1, "detector": "sift"}))
+    with open(path, "wb") as out:
+        np.savez(out, **arrays)
+    with caplog.at_level(logging.WARNING, logger="toploc.map_index"):
+        _, report = compact_index(SqlitePlaceStore.open(big_map, "sift"))
+    assert report.action == "built" and report.why.startswith("stale")
+    (record,) = caplog.records
+    assert str(path) in record.getMessage() and "\n" not in record.getMessage()
+    assert compact_index(SqlitePlaceStore.open(big_map, "sift"))[1].action == "read"
 
 
 def test_a_localizer_on_the_map_read_from_disk_sees_what_it_sees_in_memory(
