@@ -353,15 +353,19 @@ def calibrate_command(db_path: Path, detectors: str | None, progress: bool) -> N
     `map build` and `map add` do this themselves unless --no-calibrate is given.
     """
     with _map_errors():
-        if detectors is None:
-            if not db_path.is_file():
-                raise click.ClickException(f"map database {db_path} does not exist")
-            with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
-                held = sorted(map_db.info().fingerprints_per_detector)
-            if not held:
-                raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
-            detectors = ",".join(held)
-        _calibrate(db_path, parse_detectors(detectors), progress)
+        _calibrate(db_path, parse_detectors(detectors or _held_detectors(db_path)), progress)
+
+
+def _held_detectors(db_path: Path) -> str:
+    """The detectors the map holds fingerprints of, comma-separated; a click error for a
+    missing map or one without fingerprints."""
+    if not db_path.is_file():
+        raise click.ClickException(f"map database {db_path} does not exist")
+    with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
+        held = sorted(map_db.info().fingerprints_per_detector)
+    if not held:
+        raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
+    return ",".join(held)
 
 
 def _overrides(map_db: MapDatabase, read_width_px: int | None) -> dict[str, Any]:
@@ -386,10 +390,15 @@ def _overrides(map_db: MapDatabase, read_width_px: int | None) -> dict[str, Any]
 
 
 def _calibrate(
-    db_path: Path, presets: tuple[str, ...], progress: bool, formula: bool = False
+    db_path: Path,
+    presets: tuple[str, ...],
+    progress: bool,
+    formula: bool = False,
+    declare: tuple[str, str] | None = None,
 ) -> None:
     """Calibrate and store the likelihood of every preset's detector; one line each in plain
-    words (and its formula with ``formula``), with the time it took."""
+    words (and its formula with ``formula``), with the time it took; ``declare``: a pair of
+    look-alike rooms the user names (:func:`toploc.maps.calibrate_map`)."""
     from localizer.features import params_from_preset
     from toploc.maps import calibrate_map
 
@@ -397,10 +406,12 @@ def _calibrate(
         detector = params_from_preset(preset).detector
         started_s = time.monotonic()
         try:
-            model = calibrate_map(db_path, detector, progress)
+            model = calibrate_map(db_path, detector, progress, declare=declare)
         except ValueError as error:
             raise click.ClickException(str(error)) from error
         took = f" ({time.monotonic() - started_s:.1f} s)"
+        if declare is not None:
+            click.echo(f"declared look-alikes: {declare[0]} and {declare[1]}")
         click.echo(f"{explain_likelihood(detector, model)}{took}")
         with MapDatabase.open(db_path, readonly=True) as map_db:
             room_of = {place.id: place.room for place in map_db.places()}
@@ -423,27 +434,9 @@ def lookalike_command(room_a: str, room_b: str, db_path: Path, progress: bool) -
     declared pair is weighed as equally likely wherever the frame cannot tell them apart, and
     is kept by every later calibration (docs/localization.md).
     """
-    from localizer.features import params_from_preset
-    from toploc.maps import calibrate_map
-
     with _map_errors():
-        if not db_path.is_file():
-            raise click.ClickException(f"map database {db_path} does not exist")
-        with MapDatabase.open(db_path, create=False, readonly=True) as map_db:
-            held = sorted(map_db.info().fingerprints_per_detector)
-        if not held:
-            raise click.ClickException(f"{db_path} has no fingerprints to calibrate on")
-        for preset in parse_detectors(",".join(held)):
-            detector = params_from_preset(preset).detector
-            try:
-                model = calibrate_map(db_path, detector, progress, declare=(room_a, room_b))
-            except ValueError as error:
-                raise click.ClickException(str(error)) from error
-            with MapDatabase.open(db_path, readonly=True) as map_db:
-                room_of = {place.id: place.room for place in map_db.places()}
-            click.echo(f"declared look-alikes: {room_a} and {room_b}")
-            for line in lookalike_lines(model, room_of):
-                click.echo(line)
+        presets = parse_detectors(_held_detectors(db_path))
+        _calibrate(db_path, presets, progress, declare=(room_a, room_b))
 
 
 @map_group.command("connect")
