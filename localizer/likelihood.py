@@ -329,11 +329,9 @@ class CalibrationSamples:
             own = float(best.get(own_room, 0.0))
             seen_alike = alike[k] if k < len(alike) else ()
             asked[own_room] += 1
-            for room in room_sizes:
-                if room == own_room:
-                    continue
-                rest = [float(best.get(r, 0.0)) for r in room_sizes if r not in (own_room, room)]
-                chance = float(np.median(rest)) if rest else 0.0
+            rooms = [r for r in room_sizes if r != own_room]
+            chances = medians_without_each([float(best.get(r, 0.0)) for r in rooms])
+            for room, chance in zip(rooms, chances, strict=True):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
                 if float(best.get(room, 0.0)) >= bar or room in seen_alike:
                     flagged[(own_room, room)] += 1
@@ -383,6 +381,30 @@ class CalibrationSamples:
             pairs,
             tuple(unasked),
         )
+
+
+def medians_without_each(values: Sequence[float]) -> np.ndarray:
+    """For each entry of ``values``, the median of all the other entries (0.0 where there are
+    none), in one sort: ``out[i] == np.median(values[:i] + values[i+1:])``. The calibration
+    asks, for every query and every room, what the remaining rooms give by chance; at 10,000
+    places (494 rooms) a median per room per query took 12 s of the calibration, this 0.2 s."""
+    x = np.asarray(values, dtype=float)
+    n = len(x)
+    if n <= 1:
+        return np.zeros(n)
+    order = np.argsort(x, kind="stable")
+    ranked = x[order]
+    position = np.empty(n, dtype=int)
+    position[order] = np.arange(n)
+    m = n - 1  # entries left once one is removed
+
+    def kth_left(k: int) -> np.ndarray:
+        """The k-th smallest of the entries left when each one in turn is removed."""
+        return np.where(k < position, ranked[k], ranked[k + 1])
+
+    if m % 2:
+        return kth_left(m // 2).astype(float)
+    return 0.5 * (kth_left(m // 2 - 1) + kth_left(m // 2))
 
 
 def mutual_pairs(

@@ -32,7 +32,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from localizer.likelihood import PlaceScore, place_count
+from localizer.likelihood import PlaceScore, medians_without_each, place_count
 
 K = TypeVar("K", bound=Hashable)
 
@@ -92,10 +92,9 @@ def alike_by_appearance(
     own = float(matches.get(own_room, (0, 0))[0]) if room_sizes.get(own_room, 0) >= 2 else 0.0
     rooms = [r for r in room_sizes if r != own_room]
     alike = set()
-    for room in rooms:
+    chances = medians_without_each([float(matches.get(r, (0, 0))[0]) for r in rooms])
+    for room, chance in zip(rooms, chances, strict=True):
         n_matches, n_inliers = matches.get(room, (0, 0))
-        rest = [float(matches.get(r, (0, 0))[0]) for r in rooms if r != room]
-        chance = float(np.median(rest)) if rest else 0.0
         bar = max(
             APPEARANCE_MIN_MATCHES, APPEARANCE_OWN_FRACTION * own, APPEARANCE_CHANCE_FACTOR * chance
         )

@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from localizer.likelihood import (
     CalibrationSamples,
     RatioLikelihood,
     fit_ratio_likelihood,
+    medians_without_each,
 )
 
 
@@ -22,6 +25,15 @@ def samples(rng: np.random.Generator, n_queries: int, n_rooms: int) -> Calibrati
         best[own] = float(rng.poisson(25))
         queries.append((own, best))
     return CalibrationSamples.from_queries(queries, {f"r{r}": 3 for r in range(n_rooms)})
+
+
+@given(st.lists(st.integers(0, 50).map(float), max_size=12))
+def test_medians_without_each_match_a_median_per_left_out_entry(values: list[float]) -> None:
+    naive = [
+        float(np.median(values[:i] + values[i + 1 :])) if len(values) > 1 else 0.0
+        for i in range(len(values))
+    ]
+    np.testing.assert_allclose(medians_without_each(values), naive)
 
 
 def test_samples_split_own_room_and_the_others() -> None:
