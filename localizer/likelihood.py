@@ -290,6 +290,10 @@ class CalibrationSamples:
     unasked_lookalikes: tuple[str, ...] = ()
     """Rooms some query found nearly as good as its own but that no query came from: whether
     they are look-alikes is unknown until one of their places is queried too."""
+    pair_tests: tuple[str, ...] = ()
+    """Per entry of ``lookalike_pairs``, the test that made it a pair: ``"declared"`` (the
+    user named it), ``"count"`` (each room's count in the other's views, alone enough) or
+    ``"appearance"`` (only with the rooms alike by their descriptors)."""
 
     @classmethod
     def from_queries(
@@ -324,6 +328,7 @@ class CalibrationSamples:
         never chance counts, however low (its places far from the view's spot)."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
+        by_count: Counter[tuple[str, str]] = Counter()
         asked: Counter[str] = Counter()
         for k, (own_room, best) in enumerate(queries):
             own = float(best.get(own_room, 0.0))
@@ -333,7 +338,9 @@ class CalibrationSamples:
             chances = medians_without_each([float(best.get(r, 0.0)) for r in rooms])
             for room, chance in zip(rooms, chances, strict=True):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
-                if float(best.get(room, 0.0)) >= bar or room in seen_alike:
+                counted = float(best.get(room, 0.0)) >= bar
+                by_count[(own_room, room)] += counted
+                if counted or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only
         # the views near it (on the dense house, hall and living room against the bedrooms)
@@ -343,6 +350,11 @@ class CalibrationSamples:
                 set(mutual_pairs(flagged, asked))
                 | {(a, b) for a, b in told if a in room_sizes and b in room_sizes}
             )
+        )
+        counted_pairs = set(mutual_pairs(by_count, asked))
+        tests = tuple(
+            "declared" if pair in told else "count" if pair in counted_pairs else "appearance"
+            for pair in pairs
         )
         paired = {frozenset(pair) for pair in pairs}
         same: list[float] = []
@@ -380,6 +392,7 @@ class CalibrationSamples:
             n_lookalike,
             pairs,
             tuple(unasked),
+            tests,
         )
 
 

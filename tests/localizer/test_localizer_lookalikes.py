@@ -281,6 +281,30 @@ def test_rooms_alike_by_appearance_in_half_the_views_each_are_look_alikes():
     assert sorted(samples.other_room) == [0.0, 2.0, 2.0, 3.0]
 
 
+def test_each_look_alike_pair_says_which_test_found_it():
+    from localizer.likelihood import CalibrationSamples
+
+    # offices found by appearance only (one place each, few inliers); bedrooms by their counts
+    # (each explains the other's views far above chance); bathrooms named by the user
+    sizes = {"office_a": 1, "office_b": 1, "bed_1": 2, "bed_2": 2, "bath_1": 2, "bath_2": 2}
+    queries = [
+        ("office_a", {"office_b": 6.0}),
+        ("office_b", {"office_a": 5.0}),
+        ("bed_1", {"bed_1": 30.0, "bed_2": 25.0}),
+        ("bed_2", {"bed_2": 28.0, "bed_1": 24.0}),
+        ("bath_1", {"bath_1": 30.0}),
+    ]
+    alike = [{"office_b"}, {"office_a"}, {"bed_2"}, set(), set()]
+    samples = CalibrationSamples.from_queries(
+        queries, sizes, alike=alike, declared=[("bath_2", "bath_1")]
+    )
+    assert dict(zip(samples.lookalike_pairs, samples.pair_tests, strict=True)) == {
+        ("bath_1", "bath_2"): "declared",
+        ("bed_1", "bed_2"): "count",
+        ("office_a", "office_b"): "appearance",
+    }
+
+
 def test_a_room_found_alike_from_one_side_only_is_no_look_alike():
     from localizer.likelihood import CalibrationSamples
 
