@@ -35,6 +35,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -305,8 +306,13 @@ def run_one(args: argparse.Namespace) -> dict:
     result["kib_per_place"] = result["resident_mib"] * 1024 / args.size
     result["index_build_s"] = None  # FLANN: built within the load; compact: by "build"
     t0 = time.perf_counter()
-    model, _ = calibrate(loaded)
+    model, samples = calibrate(loaded)
     result["calibration_s"] = time.perf_counter() - t0
+    result["pairs_by_test"] = dict(Counter(samples.pair_tests))
+    groups = group_sizes(samples.lookalike_pairs, loaded.rooms)
+    by_count = [p for p, t in zip(samples.lookalike_pairs, samples.pair_tests, strict=True)
+                if t != "appearance"]  # fmt: skip
+    groups_by_count = group_sizes(by_count, loaded.rooms)
     loaded = replace(loaded, likelihood=model)
     localizer = Localizer(loaded, LocalizerConfig())
     # The same evidence read without look-alike groups: how much of the outcome they decide.
@@ -350,6 +356,8 @@ def run_one(args: argparse.Namespace) -> dict:
             "predicted": top,
             "outcome_without_lookalikes": outcome_of(plain_query, loaded.rooms),
             "shortlist": [e.place_id for e in observation.evidence.places],
+            "group_size": groups.get(shot["room"], 1),
+            "group_size_without_appearance": groups_by_count.get(shot["room"], 1),
         }
         if storage == "memory" and k < args.brute_queries and str(k) not in brute:
             evidence = place_evidence(fingerprint, loaded.table, localizer.evidence_params)
@@ -399,6 +407,26 @@ def probe_sweep(db: Path, shots: list[Shot], images: Path, probes: Sequence[int]
             f"with {probes[0]} probes {overlap:.2f}",
             flush=True,
         )
+
+
+def group_sizes(pairs: Sequence[tuple[str, str]], rooms: Sequence[str]) -> dict[str, int]:
+    """Per room in a look-alike group of ``pairs``, the number of rooms in its group."""
+    from localizer.lookalikes import lookalike_groups
+
+    return {rooms[i]: len(g) for g in lookalike_groups(pairs, rooms) for i in g}
+
+
+def lookalike_line(r: dict) -> str:
+    """Which tests made the look-alike pairs, and how many queries' rooms they group."""
+    grouped = [q for q in r["queries"] if q.get("group_size", 1) > 1]
+    alone = sum(q.get("group_size_without_appearance", 1) == 1 for q in grouped)
+    sizes = [q["group_size"] for q in grouped] or [1]
+    tests = ", ".join(f"{n} by {t}" for t, n in sorted(r.get("pairs_by_test", {}).items()))
+    return (
+        f"{r['places']} places, {r['storage']}: look-alike pairs {tests or 'none'}; "
+        f"{len(grouped)}/{len(r['queries'])} queries' rooms in a group (median "
+        f"{np.median(sizes):.0f} rooms), {alone} of them in none without the pairs by appearance"
+    )
 
 
 def summarise(r: dict) -> str:
@@ -505,6 +533,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     print(HEADER)
     for r in results:
         print(summarise(r))
+    print()
+    for r in results:
+        print(lookalike_line(r))
     if args.out:
         args.out.write_text(json.dumps(results, indent=1))
 
