@@ -78,14 +78,28 @@ def stop_workers(pool: ProcessPoolExecutor) -> None:
 
     For an interrupt or an error, when nothing more is wanted from the pool; the workers are
     reaped by the pool's own thread (at the latest at interpreter exit).
+
+    A worker killed while it sends a result leaves half a message in the result pipe (above
+    16 KiB, ``Connection.send_bytes`` writes the length and the payload in two writes). The
+    pool's manager thread then waits in ``recv()`` for bytes that never come, and the
+    interpreter joins that thread at exit for ever: the build that printed "interrupted" and
+    never exited (py-spy: the thread in ``Connection._recv``, reading the 26,135 bytes of a
+    result whose length it had read). Only the last writer's close ends that read, and this
+    process holds a writer too (to hand it to new workers): closed once the workers are killed,
+    the read sees end of file when they are gone, and the manager thread takes the pool for
+    broken, reaps the workers and ends.
     """
     processes = dict(getattr(pool, "_processes", None) or {})
+    result_queue = getattr(pool, "_result_queue", None)  # shutdown() forgets it
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes.values():
         try:
             process.kill()
         except (ProcessLookupError, ValueError):
             continue  # already gone, or already closed
+    writer = getattr(result_queue, "_writer", None)
+    if writer is not None:
+        writer.close()  # after shutdown() no worker is started (no max_tasks_per_child)
 
 
 class WorkerPool(ProcessPoolExecutor):
@@ -129,9 +143,10 @@ def deferred_signals(
 
     Why: a handler that raises can raise in the middle of ``concurrent.futures``' own code, e.g.
     between a lock's acquire and the ``try`` that releases it. A lock left held blocks the pool's
-    manager thread, and the interpreter waits for that thread at exit for ever (a build that
-    printed "interrupted" and never exited, seen once in CI, is the likely case). Raising only
-    from the caller's loop keeps the exception out of library code.
+    manager thread, and the interpreter waits for that thread at exit for ever. Raising only
+    from the caller's loop keeps the exception out of library code. (The build seen in CI to
+    print "interrupted" and never exit was another case: a half-sent result, see
+    :func:`stop_workers`.)
 
     A signal noted after the last ``check()`` runs its handler when the block ends, also when
     it ends by an error (a signal that broke something is still the signal: Ctrl-C, not the

@@ -1,15 +1,34 @@
 """``deferred_signals``: Ctrl-C during a parallel build is raised where the build checks for it,
-never inside the process pool's own code."""
+never inside the process pool's own code. ``stop_workers``: a process whose pool was stopped
+exits, even when a killed worker left half a result in the pool's pipe."""
 
 from __future__ import annotations
 
+import os
 import signal
+import subprocess
+import sys
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from mapdb.workers import deferred_signals
+
+REPO = Path(__file__).resolve().parents[2]
+
+HALF_SENT_RESULT = """
+import os, struct, time
+from mapdb.workers import spawn_process_pool, stop_workers
+
+pool = spawn_process_pool(1)
+pool.submit(time.sleep, 60)
+# the length of a 26,135-byte result and no payload: what a worker killed between the two
+# writes of a large result leaves in the pipe (the pool's manager thread cannot tell who wrote)
+os.write(pool._result_queue._writer.fileno(), struct.pack("!i", 26135))
+stop_workers(pool)
+"""
 
 
 @pytest.fixture(autouse=True)
@@ -103,3 +122,20 @@ def test_a_signal_noted_before_an_error_is_raised_over_it() -> None:
         signal.raise_signal(signal.SIGINT)
         raise RuntimeError("a worker died")
     assert isinstance(raised.value.__context__, RuntimeError)
+
+
+def test_a_stopped_pool_whose_pipe_holds_half_a_result_lets_the_process_exit() -> None:
+    """Before the fix the manager thread waited for the payload for ever, and the interpreter
+    waited for that thread at exit (a killed build hung after printing "interrupted")."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", HALF_SENT_RESULT],
+            env=env,
+            cwd=REPO,
+            capture_output=True,
+            timeout=20,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail("the process did not exit: the pool's manager thread is still reading")
+    assert done.returncode == 0, done.stderr.decode()
