@@ -16,8 +16,10 @@ Held out: choices of toploc's likelihood and policy were made on world seeds 0 a
 seeds 0, 1, 2) and then on world seed 2 (record seed 3); ``--world-seed 3 --record-seed 4`` was
 measured once with the final code, then used to try a rule that was not kept; the look-alike
 test by appearance was chosen on world seeds 0-3 (record seeds 1-4) and measured held out on
-world seeds 4 and 5 (record seeds 5 and 6) (docs/results.md). World seeds 6 and up have not
-been looked at: the next change must be judged on them.
+world seeds 4 and 5 (record seeds 5 and 6) (docs/results.md). Session 14 measured main on world
+seeds 6 and 7 (record seeds 7 and 8), wrote the "outdone" pair rule looking at seed 6 and
+judged it on seed 7. World seeds 8 and up have not been looked at: the next change must be
+judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised]

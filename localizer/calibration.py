@@ -225,5 +225,9 @@ def _samples(
         alike_by_appearance(q.room, best_matches(q), room_sizes, loaded.edges) for q in queries
     ]
     return CalibrationSamples.from_queries(
-        ((q.room, q.counts) for q in queries), room_sizes, alike=alike, declared=declared
+        ((q.room, q.counts) for q in queries),
+        room_sizes,
+        alike=alike,
+        declared=declared,
+        edges=loaded.edges,
     )

@@ -293,7 +293,8 @@ class CalibrationSamples:
     pair_tests: tuple[str, ...] = ()
     """Per entry of ``lookalike_pairs``, the test that made it a pair: ``"declared"`` (the
     user named it), ``"count"`` (each room's count in the other's views, alone enough) or
-    ``"appearance"`` (only with the rooms alike by their descriptors)."""
+    ``"outdone"`` (one room outdid the other's own room in its views) or ``"appearance"``
+    (only with the rooms alike by their descriptors)."""
 
     @classmethod
     def from_queries(
@@ -308,6 +309,7 @@ class CalibrationSamples:
         pair_chance_factor: float = 4.0,
         alike: Sequence[Collection[str]] = (),
         declared: Iterable[tuple[str, str]] = (),
+        edges: Iterable[tuple[str, str]] = (),
     ) -> CalibrationSamples:
         """From ``(query's room, {room: best inlier count})`` per query; ``room_sizes`` (places
         per room) says whether the query's room had another place to match.
@@ -325,10 +327,22 @@ class CalibrationSamples:
         map recorded with three places per office, every other room at most 13), yet the twin
         explains every one of them. Pairs the user ``declared`` are pairs whatever the
         views say (rooms the map lacks left out). A pair's counts in each other's views are
-        never chance counts, however low (its places far from the view's spot)."""
+        never chance counts, however low (its places far from the view's spot).
+
+        One side is enough when another room **outdoes** the own room: in at least half of a
+        room's queries (the room having another place to match), a room not joined to it by
+        one of ``edges`` (no door between them) reaches the pair bar and at least the own
+        room's count, which is not 0 (a view its own room did not verify at all is outdone by
+        any chance count). Only a twin explains a view better than the view's own room does from
+        beyond a wall; the twin's own views need not return it, as its places may stand nearer
+        each other than to the first room's (a recorded house: bedroom_b explained
+        bedroom_a's views at 9 and 5 spread inliers against their own room's 5 and 5, while
+        bedroom_b's views found their own room at 40 and 34, bedroom_a at 11 and 4)."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
         by_count: Counter[tuple[str, str]] = Counter()
+        outdone: Counter[tuple[str, str]] = Counter()
+        adjacent = {frozenset(edge) for edge in edges}
         asked: Counter[str] = Counter()
         for k, (own_room, best) in enumerate(queries):
             own = float(best.get(own_room, 0.0))
@@ -338,22 +352,41 @@ class CalibrationSamples:
             chances = medians_without_each([float(best.get(r, 0.0)) for r in rooms])
             for room, chance in zip(rooms, chances, strict=True):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
-                counted = float(best.get(room, 0.0)) >= bar
+                count = float(best.get(room, 0.0))
+                counted = count >= bar
                 by_count[(own_room, room)] += counted
+                outdone[(own_room, room)] += (
+                    counted
+                    and count >= own > 0
+                    and room_sizes.get(own_room, 0) >= 2
+                    and frozenset((own_room, room)) not in adjacent
+                )
                 if counted or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only
         # the views near it (on the dense house, hall and living room against the bedrooms)
         told = {(min(a, b), max(a, b)) for a, b in declared if a != b}
+        one_sided = {
+            (min(a, b), max(a, b))
+            for (a, b), n in outdone.items()
+            if n > 0 and n >= 0.5 * asked[a] and b in room_sizes
+        }
         pairs = tuple(
             sorted(
                 set(mutual_pairs(flagged, asked))
+                | one_sided
                 | {(a, b) for a, b in told if a in room_sizes and b in room_sizes}
             )
         )
         counted_pairs = set(mutual_pairs(by_count, asked))
         tests = tuple(
-            "declared" if pair in told else "count" if pair in counted_pairs else "appearance"
+            "declared"
+            if pair in told
+            else "count"
+            if pair in counted_pairs
+            else "outdone"
+            if pair in one_sided
+            else "appearance"
             for pair in pairs
         )
         paired = {frozenset(pair) for pair in pairs}

@@ -305,6 +305,39 @@ def test_each_look_alike_pair_says_which_test_found_it():
     }
 
 
+def test_a_room_that_outdoes_a_rooms_own_places_is_its_look_alike_from_one_side():
+    from localizer.likelihood import CalibrationSamples
+
+    # a recorded house: bedroom_b explains bedroom_a's views as well as bedroom_a does, while
+    # bedroom_b's own places stand near each other and find bedroom_a far below themselves
+    sizes = dict.fromkeys(["bedroom_a", "bedroom_b", "hall", "study", "kitchen", "bath"], 2)
+    queries = [
+        ("bedroom_a", {"bedroom_a": 5.0, "bedroom_b": 9.0, "hall": 3.0, "study": 2.0}),
+        ("bedroom_a", {"bedroom_a": 5.0, "bedroom_b": 5.0, "study": 2.0}),
+        ("bedroom_b", {"bedroom_b": 40.0, "bedroom_a": 11.0, "hall": 2.0}),
+        ("bedroom_b", {"bedroom_b": 34.0, "bedroom_a": 4.0, "hall": 2.0}),
+    ]
+    samples = CalibrationSamples.from_queries(queries, sizes)
+    assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
+    assert samples.pair_tests == ("outdone",)
+
+
+def test_a_room_seen_through_a_door_that_outdoes_the_own_room_is_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    # a bedroom's views near its door see the hall better than the bedroom's other place
+    sizes = dict.fromkeys(["bedroom_a", "hall", "study", "kitchen", "bath"], 2)
+    queries = [
+        ("bedroom_a", {"bedroom_a": 9.0, "hall": 14.0, "study": 2.0, "kitchen": 1.0}),
+        ("hall", {"hall": 40.0, "bedroom_a": 3.0, "study": 2.0}),
+    ]
+    doors = [("bedroom_a", "hall")]
+    assert CalibrationSamples.from_queries(queries, sizes, edges=doors).lookalike_pairs == ()
+    assert CalibrationSamples.from_queries(queries, sizes).lookalike_pairs == (
+        ("bedroom_a", "hall"),
+    )
+
+
 def test_a_room_found_alike_from_one_side_only_is_no_look_alike():
     from localizer.likelihood import CalibrationSamples
 
