@@ -310,9 +310,11 @@ def run_one(args: argparse.Namespace) -> dict:
     result["calibration_s"] = time.perf_counter() - t0
     result["pairs_by_test"] = dict(Counter(samples.pair_tests))
     groups = group_sizes(samples.lookalike_pairs, loaded.rooms)
-    by_count = [p for p, t in zip(samples.lookalike_pairs, samples.pair_tests, strict=True)
-                if t != "appearance"]  # fmt: skip
-    groups_by_count = group_sizes(by_count, loaded.rooms)
+    without_appearance = [
+        pair for pair, test in zip(samples.lookalike_pairs, samples.pair_tests, strict=True)
+        if test != "appearance"
+    ]  # fmt: skip
+    groups_without_appearance = group_sizes(without_appearance, loaded.rooms)
     loaded = replace(loaded, likelihood=model)
     localizer = Localizer(loaded, LocalizerConfig())
     # The same evidence read without look-alike groups: how much of the outcome they decide.
@@ -357,7 +359,7 @@ def run_one(args: argparse.Namespace) -> dict:
             "outcome_without_lookalikes": outcome_of(plain_query, loaded.rooms),
             "shortlist": [e.place_id for e in observation.evidence.places],
             "group_size": groups.get(shot["room"], 1),
-            "group_size_without_appearance": groups_by_count.get(shot["room"], 1),
+            "group_size_without_appearance": groups_without_appearance.get(shot["room"], 1),
         }
         if storage == "memory" and k < args.brute_queries and str(k) not in brute:
             evidence = place_evidence(fingerprint, loaded.table, localizer.evidence_params)

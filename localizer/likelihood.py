@@ -292,7 +292,7 @@ class CalibrationSamples:
     they are look-alikes is unknown until one of their places is queried too."""
     pair_tests: tuple[str, ...] = ()
     """Per entry of ``lookalike_pairs``, the test that made it a pair: ``"declared"`` (the
-    user named it), ``"count"`` (each room's count in the other's views, alone enough) or
+    user named it), ``"count"`` (each room's count in the other's views, alone enough),
     ``"outdone"`` (one room outdid the other's own room in its views) or ``"appearance"``
     (only with the rooms alike by their descriptors)."""
 
@@ -367,9 +367,7 @@ class CalibrationSamples:
         # the views near it (on the dense house, hall and living room against the bedrooms)
         told = {(min(a, b), max(a, b)) for a, b in declared if a != b}
         one_sided = {
-            (min(a, b), max(a, b))
-            for (a, b), n in outdone.items()
-            if n > 0 and n >= 0.5 * asked[a] and b in room_sizes
+            (min(a, b), max(a, b)) for (a, b), n in outdone.items() if n > 0 and n >= 0.5 * asked[a]
         }
         pairs = tuple(
             sorted(
@@ -449,7 +447,7 @@ def medians_without_each(values: Sequence[float]) -> np.ndarray:
         return np.where(k < position, ranked[k], ranked[k + 1])
 
     if m % 2:
-        return kth_left(m // 2).astype(float)
+        return kth_left(m // 2)
     return 0.5 * (kth_left(m // 2 - 1) + kth_left(m // 2))
 
 
