@@ -31,14 +31,14 @@ REPO = Path(__file__).resolve().parents[2]
 SITE = "site-1"
 ROBOTS = ("r1", "r2", "r3")
 ROUTER = """
-import signal, sys, threading
+import sys
 from toploc import bus
-session = bus.open_session(bus.BusConfig("router", "router", listen=(sys.argv[1],)))
-print("up", flush=True)
-done = threading.Event()
-signal.signal(signal.SIGTERM, lambda *_: done.set())
-done.wait()
-session.close()
+from toploc.commands.options import stop_on_signals
+with stop_on_signals() as stop:  # waits in slices: a signal to a Zenoh thread still stops it
+    session = bus.open_session(bus.BusConfig("router", "router", listen=(sys.argv[1],)))
+    print("up", flush=True)
+    stop.wait_for_signal()
+    session.close()
 """
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs kill -9")
