@@ -18,12 +18,13 @@ measured once with the final code, then used to try a rule that was not kept; th
 test by appearance was chosen on world seeds 0-3 (record seeds 1-4) and measured held out on
 world seeds 4 and 5 (record seeds 5 and 6) (docs/results.md). Session 14 measured main on world
 seeds 6 and 7 (record seeds 7 and 8), wrote the "outdone" pair rule looking at seed 6 and
-judged it on seed 7. World seeds 8 and up have not been looked at: the next change must be
-judged on them.
+judged it on seed 7. Session 15 judged the active loop's "one view, one piece of evidence" on
+world seed 8 (record seed 9), the change written on world seed 4. World seeds 9 and up have not
+been looked at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
-        [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised]
-        [--json out.json]
+        [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised
+        [--advised-offset M]] [--json out.json]
 """
 
 from __future__ import annotations
@@ -73,12 +74,14 @@ def recorded_db(
     record_seed: int,
     advised: bool,
     declared: bool = False,
+    advised_offset_m: float = 0.0,
 ) -> Path:
     """The cached recorded map (recorded if missing), calibrated again by the code being
     measured; ``declared``: then the world's twins (:data:`TWINS`) declared as ``toploc map
     lookalike`` does; ``advised``: then two places at the same two spots of each look-alike
     pair's rooms, as ``toploc map info`` advises."""
     suffix = ("-declared" if declared else "") + ("-advised" if advised else "")
+    suffix += f"-off{advised_offset_m:g}" if advised and advised_offset_m else ""
     name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{suffix}"
     db = cache / name / "map.db"
     start = time.perf_counter()
@@ -96,7 +99,7 @@ def recorded_db(
                 pairs = pairs_without_counterparts(
                     likelihood.lookalikes, likelihood.counterparts, room_of
                 )
-                record_counterparts(scene, pairs, record_seed, db)
+                record_counterparts(scene, pairs, record_seed, db, offset_m=advised_offset_m)
         print(f"recorded {db} in {time.perf_counter() - start:.0f} s")
     else:
         calibrate_map(db)
@@ -113,6 +116,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         args.record_seed,
         args.advised,
         args.declared,
+        args.advised_offset,
     )
 
     def show(trial: Trial) -> None:
@@ -180,6 +184,13 @@ def main() -> None:
         "--advised",
         action="store_true",
         help="after recording, two more places at two spots of each look-alike pair's rooms",
+    )
+    parser.add_argument(
+        "--advised-offset",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="with --advised: the second twin's place stands M metres off the spot (by eye)",
     )
     parser.add_argument(
         "--declared",

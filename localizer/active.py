@@ -33,13 +33,18 @@ class ActiveParams:
     visual homing loop's settings. ``lost_looks``: while the belief is ``lost``, the robot
     turns by ``lost_turn_deg``, drives ``lost_step_m`` and looks again, at most this many
     times (a robot woken facing a bare wall or a doorway sees little; a step away it may see
-    its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a move, issue 19)."""
+    its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a move, issue 19).
+    ``min_new_view_m``: a drive shorter than this (odometric) ends where the robot already
+    looked, and its frame is not folded into the belief again: the same view twice is one
+    piece of evidence, not two (homing to a counterpart at the spot the robot stands on
+    drives nowhere, and its frame repeated the last one's counts to the inlier)."""
 
     max_targets: int = 4
     homing: HomingParams = field(default_factory=HomingParams)
     lost_looks: int = 2
     lost_turn_deg: float = 120.0
     lost_step_m: float = 0.5
+    min_new_view_m: float = 0.1
 
     def __post_init__(self) -> None:
         if self.max_targets < 0 or self.lost_looks < 0:
@@ -49,6 +54,8 @@ class ActiveParams:
             )
         if not (math.isfinite(self.lost_turn_deg) and math.isfinite(self.lost_step_m)):
             raise ValueError("lost_turn_deg and lost_step_m must be finite")
+        if not self.min_new_view_m >= 0.0:
+            raise ValueError(f"min_new_view_m must be >= 0, got {self.min_new_view_m!r}")
 
 
 @dataclass(frozen=True)
@@ -82,10 +89,13 @@ def active_step(
     policy: Policy,
     context: PolicyContext,
     max_targets: int,
+    drives: int | None = None,
 ) -> int | None:
     """The place to drive to next, or ``None`` when active localization is done: the belief is
-    not ambiguous, ``max_targets`` places have been tried, or the policy has nothing left."""
-    if belief.state is not LocalizationState.AMBIGUOUS or len(context.tried) >= max_targets:
+    not ambiguous, ``max_targets`` drives were made (``drives``; default: the places tried),
+    or the policy has nothing left."""
+    made = len(context.tried) if drives is None else drives
+    if belief.state is not LocalizationState.AMBIGUOUS or made >= max_targets:
         return None
     return policy.choose(belief, evidence, places, context)
 
@@ -107,6 +117,9 @@ def localize_actively(
     (default: :func:`drive_home` toward its stored fingerprint with ``params.homing``); a drive
     that ends with reason :data:`CANCELLED` is the last: the robot looks once where it stopped.
     While the belief is ``lost`` the robot steps away and looks again (``params.lost_looks``).
+    A drive shorter than ``params.min_new_view_m`` adds no frame to the belief, and a drive
+    to a place also ends the drives to its counterparts at the same spot
+    (:meth:`Localizer.same_spot_places`): from there the robot has looked already.
     """
     chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
@@ -147,17 +160,24 @@ def localize_actively(
             chosen,
             context,
             params.max_targets,
+            len(visits),
         )
         if target is None:
             break
         context = context.trying(target)
+        for same_spot in localizer.same_spot_places(target):  # looked at from there already
+            context = context.trying(same_spot)
         notify(localizer.belief(LocalizationState.HOMING))
         homing = go(target)
-        frames += len(homing.lengths) + 1
+        frames += len(homing.lengths)
         distance += homing.distance_m
-        localizer.predict(HOMING_STAY_PROBABILITY)
-        observation = replace(localizer.observe(robot.capture().image), at_place=target)
-        belief = localizer.update(observation)
+        if homing.distance_m >= params.min_new_view_m:
+            localizer.predict(HOMING_STAY_PROBABILITY)
+            observation = replace(localizer.observe(robot.capture().image), at_place=target)
+            belief = localizer.update(observation)
+            frames += 1
+        else:
+            belief = localizer.belief()
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
         if homing.reason == CANCELLED:

@@ -279,6 +279,20 @@ class Localizer:
         compared = [group for group in self.lookalike_groups if group not in aliased]
         return model.from_counts(counts, aliased, compared)
 
+    def same_spot_places(self, place_id: int) -> tuple[int, ...]:
+        """The counterparts of ``place_id`` that stand on its spot: they verify each other on
+        at least :data:`~localizer.lookalikes.EXACT_COUNTERPART_SHARE` of its keypoints (a
+        map rendered on a grid in each twin's frame). Homing to one of them ends where homing
+        to ``place_id`` did, and a frame there repeats the view already taken."""
+        keypoints = self.map.keypoints(place_id)
+        return tuple(
+            sorted(
+                partner
+                for partner in self.counterparts.get(place_id, ())
+                if self._pair_inliers(place_id, partner) >= EXACT_COUNTERPART_SHARE * keypoints
+            )
+        )
+
     def _inexact_counterpart(self, place_id: int | None) -> int | None:
         """``place_id`` if one of its counterparts stands off its spot (they verify each other
         on less than :data:`~localizer.lookalikes.EXACT_COUNTERPART_SHARE`), else None."""

@@ -9,6 +9,7 @@ from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
+from localizer.visual_homing import HomingResult
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -117,3 +118,57 @@ def test_no_targets_allowed_means_no_drive(localizer):
 def test_an_unknown_policy_is_refused_by_name(localizer):
     with pytest.raises(ValueError, match="unknown disambiguation policy 'nearest'"):
         localize_actively(localizer, BlindRobot(), "nearest")
+
+
+class CountingRobot:
+    """The simulated robot, counting its captures."""
+
+    def __init__(self, robot: SimulatedRobot) -> None:
+        self.robot, self.captures = robot, 0
+
+    def capture(self) -> Capture:
+        self.captures += 1
+        return self.robot.capture()
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self) -> Pose2D:
+        return self.robot.odometry()
+
+    def stop(self) -> None:
+        self.robot.stop()
+
+
+def test_a_drive_that_goes_nowhere_does_not_count_the_same_view_twice(localizer):
+    # the robot already stands where each target's view is: homing arrives without moving
+    robot = CountingRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
+    )
+
+    def stay(place_id: int) -> HomingResult:
+        return HomingResult(True, 0, 0.0, "arrived", localizer.map.fingerprint(place_id))
+
+    result = localize_actively(localizer, robot, "most-likely", home=stay)
+    assert result.visits, "the first look must be ambiguous for this test to say anything"
+    assert robot.captures == 1 and result.frames == 1
+    assert result.final.as_dict() == pytest.approx(result.first.as_dict())
+
+
+def test_places_on_one_spot_of_twin_rooms_are_driven_to_once(localizer):
+    # the batch map's twin offices have a place at every spot of both: one drive looks at both
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=3, camera=CAMERA)
+    result = localize_actively(localizer, robot, "separating")
+    visited = [visit.place_id for visit in result.visits]
+    assert visited, "the first look must be ambiguous for this test to say anything"
+    for k, place_id in enumerate(visited):
+        for earlier in visited[:k]:
+            assert place_id not in localizer.same_spot_places(earlier)
+
+
+def test_a_twin_place_on_the_grid_has_its_counterpart_on_its_spot(localizer):
+    office_a = [p.id for p in localizer.map.places if p.room == "office_a"]
+    same = {place_id: localizer.same_spot_places(place_id) for place_id in office_a}
+    assert any(same.values())
+    for partners in same.values():
+        assert {localizer.map.place(p).room for p in partners} <= {"office_b"}

@@ -112,3 +112,32 @@ def test_map_info_says_where_twins_can_be_told_apart(building_map):
     assert result.exit_code == 0, result.output
     assert "look-alike rooms: office_a ~ office_b" in result.output
     assert "(counterparts)" in result.output and "same two spots" not in result.output
+
+
+@pytest.fixture(scope="module")
+def advised_by_eye(recorded, tmp_path_factory):
+    """The recorded map plus one counterpart pair, office_b's place 0.15 m off office_a's spot."""
+    import shutil
+
+    from toploc.evaluation.recorded_maps import record_counterparts
+
+    db = tmp_path_factory.mktemp("advised") / "map.db"
+    shutil.copy(recorded[0], db)
+    pair = record_counterparts(
+        make_world("building"), [("office_a", "office_b")], 0, db, camera=CAMERA, spots=1,
+        offset_m=0.15,
+    )  # fmt: skip
+    return db, pair
+
+
+def test_a_counterpart_recorded_by_eye_stands_off_the_spot(advised_by_eye):
+    _, (first, second) = advised_by_eye
+    world = make_world("building")
+    shift = np.subtract(world.room("office_b").origin_m, world.room("office_a").origin_m)
+    miss = (
+        np.subtract(
+            (second.true_pose.x_m, second.true_pose.y_m), (first.true_pose.x_m, first.true_pose.y_m)
+        )
+        - shift
+    )
+    assert float(np.hypot(*miss)) == pytest.approx(0.15)

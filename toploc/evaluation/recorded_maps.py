@@ -109,6 +109,28 @@ def record_room(
     return recorded
 
 
+def _miss(
+    obstacles: Obstacles,
+    room: str,
+    spot_xy_m: tuple[float, float],
+    shift_xy_m: tuple[float, float],
+    offset_m: float,
+    rng: np.random.Generator,
+) -> tuple[float, float]:
+    """``shift_xy_m`` (from a spot of the first twin to the same spot of ``room``, building
+    frame, m) plus ``offset_m`` in a random direction, where the robot fits inside ``room``
+    (without the offset when no draw fits)."""
+    for _ in range(MAX_DRAWS if offset_m > 0 else 0):
+        angle_rad = float(rng.uniform(-math.pi, math.pi))
+        dx = shift_xy_m[0] + offset_m * math.cos(angle_rad)
+        dy = shift_xy_m[1] + offset_m * math.sin(angle_rad)
+        x, y = spot_xy_m[0] + dx, spot_xy_m[1] + dy
+        inside = obstacles.world.room_at(x, y)
+        if inside is not None and inside.name == room and obstacles.free(np.array([[x, y]]))[0]:
+            return dx, dy
+    return shift_xy_m
+
+
 def record_counterparts(
     world: World,
     pairs: Sequence[tuple[str, str]],
@@ -117,19 +139,23 @@ def record_counterparts(
     detectors: Sequence[str] = ("sift",),
     camera: PanoramaCamera | None = None,
     spots: int = 2,
+    offset_m: float = 0.0,
 ) -> list[RecordedPlace]:
     """Follow ``toploc map info``'s advice for look-alike rooms without counterparts: record
     ``spots`` more places in each room of each pair, at the same spots of their frames (seeded
     random free spots of the first room, the same room-frame positions in the second: the
     twins' frames are identical), with no pose (the user carried the robot there); then
-    calibrate again."""
+    calibrate again. ``offset_m``: the second room's place stands this far from the spot, in a
+    seeded random direction (a user placing the robot by eye misses it by a few decimetres)."""
     rng = np.random.default_rng([seed, 23])
     obstacles = Obstacles.of(world, 0.2)
     recorded: list[RecordedPlace] = []
     for first, second in [pair for pair in pairs for _ in range(spots)]:
         spot = random_free_pose(obstacles, first, rng)
         (x0, y0), (x1, y1) = world.room(first).origin_m, world.room(second).origin_m
-        for room, (dx, dy) in ((first, (0.0, 0.0)), (second, (x1 - x0, y1 - y0))):
+        spot_xy_m, shift_xy_m = (spot.x_m, spot.y_m), (x1 - x0, y1 - y0)
+        miss = _miss(obstacles, second, spot_xy_m, shift_xy_m, offset_m, rng)
+        for room, (dx, dy) in ((first, (0.0, 0.0)), (second, miss)):
             heading_rad = float(rng.uniform(-math.pi, math.pi))
             pose = Pose2D(spot.x_m + dx, spot.y_m + dy, heading_rad)
             robot = SimulatedRobot(world, pose, seed=seed, grey=True, camera=camera)
