@@ -293,7 +293,8 @@ class CalibrationSamples:
     pair_tests: tuple[str, ...] = ()
     """Per entry of ``lookalike_pairs``, the test that made it a pair: ``"declared"`` (the
     user named it), ``"count"`` (each room's count in the other's views, alone enough),
-    ``"outdone"`` (one room outdid the other's own room in its views) or ``"appearance"``
+    ``"outdone"`` (one room outdid the other's own room in its views), ``"standout"`` (one
+    stood out of every other room in half of the other's views) or ``"appearance"``
     (only with the rooms alike by their descriptors)."""
 
     @classmethod
@@ -307,6 +308,9 @@ class CalibrationSamples:
         pair_fraction: float = 0.5,
         pair_min_inliers: float = 8.0,
         pair_chance_factor: float = 4.0,
+        standout_min_inliers: float = 5.0,
+        standout_factor: float = 2.0,
+        standout_fraction: float = 0.25,
         alike: Sequence[Collection[str]] = (),
         declared: Iterable[tuple[str, str]] = (),
         edges: Iterable[tuple[str, str]] = (),
@@ -337,11 +341,22 @@ class CalibrationSamples:
         beyond a wall; the twin's own views need not return it, as its places may stand nearer
         each other than to the first room's (a recorded house: bedroom_b explained
         bedroom_a's views at 9 and 5 spread inliers against their own room's 5 and 5, while
-        bedroom_b's views found their own room at 40 and 34, bedroom_a at 11 and 4)."""
+        bedroom_b's views found their own room at 40 and 34, bedroom_a at 11 and 4).
+
+        One side is enough, too, when a room **stands out** in at least half of a room's
+        queries (that room having another place to match and verifying the view, the other
+        room asked too): with no door between them, at least ``standout_min_inliers``,
+        ``standout_fraction`` of the own room's count and ``standout_factor`` times every
+        room but the two. A room seen through a door is joined to the view's room by it (left
+        out), one seen through two doors is seen with the room between them; a twin stands
+        out alone (bare twin bedrooms recorded three places each: bedroom_b's views found
+        bedroom_a at 11.7, 12.1 and 4.2 spread inliers against their own room's 25, 23 and
+        14, no other room above 2.3; bedroom_a's views found bedroom_b at 15.0, 2.9 and 2.2)."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
         by_count: Counter[tuple[str, str]] = Counter()
         outdone: Counter[tuple[str, str]] = Counter()
+        standing_out: Counter[tuple[str, str]] = Counter()
         adjacent = {frozenset(edge) for edge in edges}
         asked: Counter[str] = Counter()
         for k, (own_room, best) in enumerate(queries):
@@ -350,7 +365,8 @@ class CalibrationSamples:
             asked[own_room] += 1
             rooms = [r for r in room_sizes if r != own_room]
             chances = medians_without_each([float(best.get(r, 0.0)) for r in rooms])
-            for room, chance in zip(rooms, chances, strict=True):
+            rest = largest_without_each([float(best.get(r, 0.0)) for r in rooms])
+            for room, chance, others_max in zip(rooms, chances, rest, strict=True):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
                 count = float(best.get(room, 0.0))
                 counted = count >= bar
@@ -358,6 +374,17 @@ class CalibrationSamples:
                 outdone[(own_room, room)] += (
                     counted
                     and count >= own > 0
+                    and room_sizes.get(own_room, 0) >= 2
+                    and frozenset((own_room, room)) not in adjacent
+                )
+                standing_out[(own_room, room)] += (
+                    count
+                    >= max(
+                        standout_min_inliers,
+                        standout_factor * others_max,
+                        standout_fraction * own,
+                    )
+                    and own > 0  # a view its own room did not verify stands out of nothing
                     and room_sizes.get(own_room, 0) >= 2
                     and frozenset((own_room, room)) not in adjacent
                 )
@@ -369,10 +396,16 @@ class CalibrationSamples:
         one_sided = {
             (min(a, b), max(a, b)) for (a, b), n in outdone.items() if n > 0 and n >= 0.5 * asked[a]
         }
+        standouts = {
+            (min(a, b), max(a, b))
+            for (a, b), n in standing_out.items()
+            if n > 0 and n >= 0.5 * asked[a] and asked[b] > 0  # b judged from its views too
+        }
         pairs = tuple(
             sorted(
                 set(mutual_pairs(flagged, asked))
                 | one_sided
+                | standouts
                 | {(a, b) for a, b in told if a in room_sizes and b in room_sizes}
             )
         )
@@ -384,6 +417,8 @@ class CalibrationSamples:
             if pair in counted_pairs
             else "outdone"
             if pair in one_sided
+            else "standout"
+            if pair in standouts
             else "appearance"
             for pair in pairs
         )
@@ -425,6 +460,19 @@ class CalibrationSamples:
             tuple(unasked),
             tests,
         )
+
+
+def largest_without_each(values: Sequence[float]) -> np.ndarray:
+    """For each entry of ``values``, the largest of all the other entries (0.0 where there
+    are none)."""
+    x = np.asarray(values, dtype=float)
+    if len(x) <= 1:
+        return np.zeros(len(x))
+    order = np.argsort(x)
+    top, second = x[order[-1]], x[order[-2]]
+    out = np.full(len(x), top)
+    out[order[-1]] = second
+    return out
 
 
 def medians_without_each(values: Sequence[float]) -> np.ndarray:

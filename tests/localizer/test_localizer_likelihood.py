@@ -12,6 +12,7 @@ from localizer.likelihood import (
     CalibrationSamples,
     RatioLikelihood,
     fit_ratio_likelihood,
+    largest_without_each,
     medians_without_each,
 )
 
@@ -34,6 +35,12 @@ def test_medians_without_each_match_a_median_per_left_out_entry(values: list[flo
         for i in range(len(values))
     ]
     np.testing.assert_allclose(medians_without_each(values), naive)
+
+
+@given(st.lists(st.integers(0, 50).map(float), max_size=12))
+def test_largest_without_each_match_a_max_per_left_out_entry(values: list[float]) -> None:
+    naive = [max(values[:i] + values[i + 1 :], default=0.0) for i in range(len(values))]
+    np.testing.assert_array_equal(largest_without_each(values), naive)
 
 
 def test_samples_split_own_room_and_the_others() -> None:

@@ -395,3 +395,48 @@ def test_declared_look_alikes_are_a_pair_whatever_the_views_say():
     told = CalibrationSamples.from_queries(queries, sizes, declared=[("office_b", "office_a")])
     assert told.lookalike_pairs == (("office_a", "office_b"),)
     assert sorted(told.other_room) == [2.0, 3.0]  # the twins' counts are no chance samples
+
+
+# a bare recorded house, three places per room: bedroom_b's views find bedroom_a below half
+# their own room's counts, yet far above every other room; bedroom_a's views find bedroom_b once
+BEDROOMS = [
+    ("bedroom_a", {"bedroom_b": 15.0, "bedroom_a": 2.7, "hall": 1.3, "study": 0.3}),
+    ("bedroom_a", {"bedroom_a": 10.0, "bedroom_b": 2.9, "hall": 0.6, "study": 0.1}),
+    ("bedroom_a", {"bedroom_a": 7.5, "bath": 2.4, "bedroom_b": 2.2, "hall": 0.8}),
+    ("bedroom_b", {"bedroom_b": 24.7, "bedroom_a": 11.7, "living": 0.6}),
+    ("bedroom_b", {"bedroom_b": 22.8, "bedroom_a": 12.1, "study": 1.4, "hall": 1.3}),
+    ("bedroom_b", {"bedroom_b": 14.4, "bedroom_a": 4.2, "kitchen": 2.3, "hall": 1.4}),
+]
+HOUSE = dict.fromkeys(["bedroom_a", "bedroom_b", "hall", "living", "kitchen", "study", "bath"], 3)
+
+
+def test_a_room_that_stands_out_of_every_other_room_in_a_rooms_views_is_its_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    samples = CalibrationSamples.from_queries(BEDROOMS, HOUSE)
+    assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
+    assert samples.pair_tests == ("standout",)
+
+
+def test_rooms_joined_by_a_door_never_stand_out_as_look_alikes():
+    from localizer.likelihood import CalibrationSamples
+
+    doors = [("bedroom_a", "bedroom_b")]
+    assert CalibrationSamples.from_queries(BEDROOMS, HOUSE, edges=doors).lookalike_pairs == ()
+
+
+def test_a_room_level_with_another_room_does_not_stand_out():
+    from localizer.likelihood import CalibrationSamples
+
+    # the same views with the kitchen as high as the twin in each: shared texture, not a twin
+    level = [(room, counts | {"kitchen": counts[t]}) for (room, counts), t in zip(
+        BEDROOMS, ["bedroom_b"] * 3 + ["bedroom_a"] * 3, strict=True
+    )]  # fmt: skip
+    assert CalibrationSamples.from_queries(level, HOUSE).lookalike_pairs == ()
+
+
+def test_a_room_standing_out_in_fewer_than_half_of_a_rooms_views_is_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    only_a = [(room, counts) for room, counts in BEDROOMS if room == "bedroom_a"]
+    assert CalibrationSamples.from_queries(only_a, HOUSE).lookalike_pairs == ()
