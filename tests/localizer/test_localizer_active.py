@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from robot_helpers import RobotWrapper
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
@@ -120,24 +121,16 @@ def test_an_unknown_policy_is_refused_by_name(localizer):
         localize_actively(localizer, BlindRobot(), "nearest")
 
 
-class CountingRobot:
+class CountingRobot(RobotWrapper):
     """The simulated robot, counting its captures."""
 
     def __init__(self, robot: SimulatedRobot) -> None:
-        self.robot, self.captures = robot, 0
+        super().__init__(robot)
+        self.captures = 0
 
     def capture(self) -> Capture:
         self.captures += 1
         return self.robot.capture()
-
-    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
-        return self.robot.move(turn_rad, forward_m)
-
-    def odometry(self) -> Pose2D:
-        return self.robot.odometry()
-
-    def stop(self) -> None:
-        self.robot.stop()
 
 
 def test_a_drive_that_goes_nowhere_does_not_count_the_same_view_twice(localizer):
