@@ -89,13 +89,12 @@ def active_step(
     policy: Policy,
     context: PolicyContext,
     max_targets: int,
-    drives: int | None = None,
+    drives: int,
 ) -> int | None:
     """The place to drive to next, or ``None`` when active localization is done: the belief is
-    not ambiguous, ``max_targets`` drives were made (``drives``; default: the places tried),
-    or the policy has nothing left."""
-    made = len(context.tried) if drives is None else drives
-    if belief.state is not LocalizationState.AMBIGUOUS or made >= max_targets:
+    not ambiguous, ``drives`` drives were made of the ``max_targets`` allowed, or the policy has
+    nothing left."""
+    if belief.state is not LocalizationState.AMBIGUOUS or drives >= max_targets:
         return None
     return policy.choose(belief, evidence, places, context)
 

@@ -371,22 +371,15 @@ class CalibrationSamples:
                 count = float(best.get(room, 0.0))
                 counted = count >= bar
                 by_count[(own_room, room)] += counted
-                outdone[(own_room, room)] += (
-                    counted
-                    and count >= own > 0
+                # one side may pair only a view its own room verified, from beyond a wall
+                one_side = (
+                    own > 0
                     and room_sizes.get(own_room, 0) >= 2
                     and frozenset((own_room, room)) not in adjacent
                 )
-                standing_out[(own_room, room)] += (
-                    count
-                    >= max(
-                        standout_min_inliers,
-                        standout_factor * others_max,
-                        standout_fraction * own,
-                    )
-                    and own > 0  # a view its own room did not verify stands out of nothing
-                    and room_sizes.get(own_room, 0) >= 2
-                    and frozenset((own_room, room)) not in adjacent
+                outdone[(own_room, room)] += one_side and counted and count >= own
+                standing_out[(own_room, room)] += one_side and count >= max(
+                    standout_min_inliers, standout_factor * others_max, standout_fraction * own
                 )
                 if counted or room in seen_alike:
                     flagged[(own_room, room)] += 1

@@ -152,6 +152,13 @@ class Obstacles:
         )
         return clear & inside
 
+    def fits_in(self, room: str, x_m: float, y_m: float) -> bool:
+        """Whether the disc fits at ``(x_m, y_m)`` inside ``room`` (not in a door opening)."""
+        found = self.world.room_at(x_m, y_m)
+        return (
+            found is not None and found.name == room and bool(self.free(np.array([[x_m, y_m]]))[0])
+        )
+
     def _on_door_line(self, x_m: float, y_m: float) -> bool:
         for door in self.world.doors:
             wall = self.world.door_wall(door)
@@ -184,8 +191,7 @@ def random_free_pose(
     for _ in range(max_tries):
         x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
         heading = float(rng.uniform(-math.pi, math.pi))
-        found = obstacles.world.room_at(x, y)
-        if found is not None and found.name == room and obstacles.free(np.array([[x, y]]))[0]:
+        if obstacles.fits_in(room, x, y):
             return Pose2D(x, y, heading)
     raise ValueError(f"no free position for a {obstacles.radius_m} m robot in room {room!r}")
 

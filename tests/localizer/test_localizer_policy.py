@@ -274,7 +274,7 @@ def run_episode(policy, true_room: str, start_k: int, rng, max_moves: int = 12):
         snapshot = RoomBelief.from_probabilities(
             WORLD_ROOMS, belief.probabilities, None, evidence, count="inliers"
         )
-        target = active_step(snapshot, evidence, places, policy, context, max_moves)
+        target = active_step(snapshot, evidence, places, policy, context, max_moves, moves)
         if target is None:
             break
         context = context.trying(target)

@@ -124,9 +124,7 @@ def _miss(
         angle_rad = float(rng.uniform(-math.pi, math.pi))
         dx = shift_xy_m[0] + offset_m * math.cos(angle_rad)
         dy = shift_xy_m[1] + offset_m * math.sin(angle_rad)
-        x, y = spot_xy_m[0] + dx, spot_xy_m[1] + dy
-        inside = obstacles.world.room_at(x, y)
-        if inside is not None and inside.name == room and obstacles.free(np.array([[x, y]]))[0]:
+        if obstacles.fits_in(room, spot_xy_m[0] + dx, spot_xy_m[1] + dy):
             return dx, dy
     return shift_xy_m
 
