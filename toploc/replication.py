@@ -4,8 +4,11 @@
 :mod:`mapdb.replica`) of site map ``map_id``: the first time it copies the map node's
 snapshot; after that it asks for the changes after its version, whenever the map node's
 ``changed`` names a newer version and every ``poll_s`` seconds (what catches up a robot whose
-link was down, or that missed a ``changed``). After each update it calls ``on_updated`` (the
-service's :class:`~toploc.service.MapRefresher`, which swaps the grown map into the localizer).
+link was down, or that missed a ``changed``). After each update it publishes the robot's own
+``toploc/<robot_id>/map/changed`` (``what``: ``replica``), as a map node does after a write, so
+everything that follows the robot's map (its localizer's :class:`~toploc.service.MapRefresher`,
+the ROS 2 bridge's place cache, any client) hears of places other robots added; then it calls
+``on_updated`` if given.
 
 While the map node cannot be reached the robot localizes from the replica as it is;
 :meth:`MapReplicator.map_age_s` (the belief's ``map_age_s``) is the seconds since the replica
@@ -20,6 +23,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -28,6 +32,7 @@ from mapdb.replica import ReplicaState, apply_changes, check_same_map, replica_s
 from mapdb.replication import BadMapDataError, decode_changes
 from toploc import bus
 from toploc.bus.clients.site_map import SiteMapClient, subscribe_site_changes
+from toploc.bus.schemas import CHANGED
 
 POLL_S = 2.0
 """How often a replica asks the map node for its version (and catches up)."""
@@ -39,7 +44,8 @@ class MapReplicator:
     """Keep the replica at ``path`` of site map ``map_id`` current over ``session``.
 
     :meth:`sync` runs one round in the caller's thread; :meth:`start` runs rounds on a thread
-    of its own until :meth:`close`.
+    of its own until :meth:`close`. ``robot_id``: the robot whose ``map/changed`` each update
+    is published on (None: published on none).
     """
 
     def __init__(
@@ -50,6 +56,7 @@ class MapReplicator:
         on_updated: Callable[[], None] | None = None,
         poll_s: float = POLL_S,
         timeout_s: float = QUERY_TIMEOUT_S,
+        robot_id: str | None = None,
     ) -> None:
         self.map_id = bus.check_map_id(map_id)
         self.path = Path(path)
@@ -63,7 +70,11 @@ class MapReplicator:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._subscriber = subscribe_site_changes(session, map_id, self._on_changed)
+        self._entities: list[Any] = [subscribe_site_changes(session, map_id, self._on_changed)]
+        self._publisher: zenoh.Publisher | None = None
+        if robot_id is not None:
+            self._publisher = session.declare_publisher(bus.key(robot_id, bus.MAP_CHANGED))
+            self._entities.append(self._publisher)
 
     def state(self) -> ReplicaState | None:
         """The replica's map id and version; None before its first snapshot."""
@@ -115,6 +126,10 @@ class MapReplicator:
         if changed:
             self.updates += 1
             _log.info("replica %s at version %d", self.path, state.version)
+            if self._publisher is not None:
+                message = {"what": "replica", "stamp": time.time(), "version": state.version,
+                           "map_id": self.map_id}  # fmt: skip
+                self._publisher.put(CHANGED.encode(message))
             if self.on_updated is not None:
                 self.on_updated()
         return changed
@@ -165,4 +180,4 @@ class MapReplicator:
         self._wake.set()
         if self._thread is not None:
             self._thread.join(wait_s)
-        bus.undeclare_all([self._subscriber])
+        bus.undeclare_all(self._entities)

@@ -273,15 +273,16 @@ def enter_localizer_nodes(
     publications to its subscribers at once). On exit a running localization is ended first.
     ``map_from``: a site map's id; ``db_path`` is then this robot's replica of it (made or
     brought up to date first, :func:`enter_replica`), reloaded after each update the replica
-    takes, with the likelihood that comes with the map (no ``recalibrate``); each belief
-    carries the replica's ``map_age_s``.
+    takes (published as the robot's ``map/changed``, ``what`` ``replica``), with the likelihood
+    that comes with the map (no ``recalibrate``); each belief carries the replica's
+    ``map_age_s``.
     """
     localizer_config = localizer_config or LocalizerConfig()
     limits = limits or Limits()
     replicator = None
     map_age: Callable[[], float | None] | None = None
     if map_from is not None:
-        replicator = enter_replica(stack, session, map_from, db_path)
+        replicator = enter_replica(stack, session, map_from, db_path, robot_id=robot_id)
         recalibrate, allow_empty, map_age = False, True, replicator.map_age_s
     localizer = None
     if not (allow_empty and _has_no_places(db_path)):
@@ -306,8 +307,7 @@ def enter_localizer_nodes(
     )
     stack.callback(refresher.close)
     stack.callback(subscribe_changes(session, robot_id, refresher.changed).undeclare)
-    if replicator is not None:
-        replicator.on_updated = refresher.changed
+    if replicator is not None:  # its updates reach the refresher as the robot's map/changed
         replicator.start()
     return LocalizerNodes(runner, localizer, refresher, homing, replicator)
 
@@ -364,12 +364,14 @@ def enter_replica(
     map_id: str,
     replica_path: Path,
     wait_s: float = REPLICA_WAIT_S,
+    robot_id: str | None = None,
 ) -> MapReplicator:
     """The replica of site map ``map_id`` at ``replica_path``, brought up to date first (up to
-    ``wait_s``; a robot whose link is down starts on the replica it has). Raises
+    ``wait_s``; a robot whose link is down starts on the replica it has); each later update is
+    published as robot ``robot_id``'s ``map/changed``. Raises
     :class:`~mapdb.errors.ReplicaError` for a replica refused, and for none at all while the map
     node cannot be reached."""
-    replicator = MapReplicator(session, map_id, replica_path)
+    replicator = MapReplicator(session, map_id, replica_path, robot_id=robot_id)
     stack.callback(replicator.close)
     if not replicator.wait_current(wait_s):
         state = replicator.state()

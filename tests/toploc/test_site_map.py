@@ -29,7 +29,7 @@ from toploc.bus import BusConfig, open_session
 from toploc.bus.clients.site_map import SiteMapClient
 from toploc.bus.messages import check_belief
 from toploc.bus.png_codec import encode_png
-from toploc.bus.schemas import CHANGES_BATCH, MAP_VERSION, SNAPSHOT_CHUNK
+from toploc.bus.schemas import CHANGED, CHANGES_BATCH, MAP_VERSION, SNAPSHOT_CHUNK
 from toploc.cli import main
 from toploc.nodes.localizer import LocalizerClient
 from toploc.nodes.mapdb import MapClient, MapNode, check_site_map
@@ -237,6 +237,24 @@ def test_robots_add_through_their_own_keys_or_the_site_keys(site, tmp_path) -> N
         assert site.client.add(image, "office_a", 1.5, 1.5)["new"]
         again = MapClient(site.viewer, "r1").add(image, "office_a", 1.5, 1.5)
         assert not again["new"]  # the same place, through the robot's key
+
+
+def test_a_site_robot_says_on_its_own_keys_when_its_replica_takes_other_robots_places(
+    site, tmp_path
+) -> None:
+    heard: list[dict] = []
+    with ExitStack() as stack:
+        robot_service(stack, site, "r1", tmp_path / "r1.db")
+        stack.callback(
+            bus.subscribe(
+                site.viewer, bus.key("r1", bus.MAP_CHANGED), CHANGED.decode, heard.append
+            ).undeclare
+        )
+        image = encode_png(robot_in("office_a", 1.5, 1.5).capture().image)
+        assert site.client.add(image, "office_a", 1.5, 1.5)["new"]  # another robot's add
+        assert wait_for(lambda: any(m["version"] == site.version() for m in heard), 10.0)
+    (message,) = heard
+    assert message["what"] == "replica" and message["map_id"] == SITE
 
 
 def test_a_map_named_once_keeps_its_name(tmp_path) -> None:

@@ -108,8 +108,9 @@ CONNECT = Schema("connect", {"room_a": str, "room_b": str})
 CONNECTED = Schema("connected", {"room_a": str, "room_b": str, "added": bool})
 """``map/connect`` reply (a client reads ``added`` only)."""
 CHANGED = Schema("changed", {"what": str}, {"stamp": float, "version": int, "map_id": str})
-"""``map/changed`` publication after each write; ``what``: ``add`` or ``connect``; the map's
-version after it and its id (a site map's ``changed`` always carries them)."""
+"""``map/changed`` publication after each write; ``what``: ``add`` or ``connect`` (a map node's
+write), ``replica`` (a site robot's replica took the site map's changes); the map's version
+after it and its id (a site map's ``changed`` and a replica's always carry them)."""
 
 # --- a site's shared map: toploc.nodes.mapdb (site keys), toploc.replication -----------------
 

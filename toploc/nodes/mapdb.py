@@ -23,8 +23,9 @@ that made it; a map rebuilt while the node runs is thus served fresh. A map erro
 map, a lock) becomes an error reply and nothing is written.
 
 - ``map/changed`` (publication, after each write, before its reply): ``{"kind": "changed",
-  "what": "add" | "connect", "stamp"}``. A localizer in this process or another one reloads
-  its map when it hears it (:func:`~toploc.bus.clients.mapdb.subscribe_changes`,
+  "what": "add" | "connect", "stamp"}`` (a site robot's replicator publishes ``"what":
+  "replica"`` on the same key). A localizer in this process or another one reloads its map when
+  it hears it (:func:`~toploc.bus.clients.mapdb.subscribe_changes`,
   :class:`toploc.service.MapRefresher`): it reads the same SQLite file, so a map node and a
   localizer node in two processes need the same file (one machine, or shared storage).
 """
