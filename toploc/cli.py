@@ -33,6 +33,7 @@ from toploc.commands.node import node_group
 from toploc.commands.serve import serve
 from toploc.commands.sim import sim_group
 from toploc.commands.simulate import simulate
+from toploc.commands.site import site_group
 from toploc.logs import LEVELS, chosen_level, configure_logging
 
 INTERRUPTED_EXIT = 130  # 128 + SIGINT, what shells report for Ctrl-C
@@ -118,3 +119,4 @@ main.add_command(localize)
 main.add_command(demo)
 main.add_command(serve)
 main.add_command(node_group)
+main.add_command(site_group)

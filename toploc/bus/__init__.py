@@ -12,6 +12,8 @@ Modules, from the ground up:
 - :mod:`~toploc.bus.messages`: messages to and from toploc's own types (odometry, belief, ...);
 - :mod:`~toploc.bus.config`: :class:`BusConfig` from options and a user's Zenoh file;
 - :mod:`~toploc.bus.session`: opening a session, one node per role and robot id;
+- :mod:`~toploc.bus.access_control`: a site router's rules, one user per robot, and its
+  users' Zenoh files;
 - :mod:`~toploc.bus.request_reply`: queryables and queries;
 - :mod:`~toploc.bus.subscriptions`: subscribers, and undeclaring what was declared;
 - :mod:`~toploc.bus.clients`: what talks to each node (the nodes themselves:
