@@ -20,8 +20,10 @@ world seeds 4 and 5 (record seeds 5 and 6) (docs/results.md). Session 14 measure
 seeds 6 and 7 (record seeds 7 and 8), wrote the "outdone" pair rule looking at seed 6 and
 judged it on seed 7. Session 15 judged the active loop's "one view, one piece of evidence" on
 world seed 8 (record seed 9), the change written on world seed 4, then wrote the "standout" pair
-rule looking at seed 8 and judged it on seeds 9 and 10. World seeds 11 and up have not been
-looked at: the next change must be judged on them.
+rule looking at seed 8 and judged it on seeds 9 and 10. Session 16 wrote the "far above
+chance" standout looking at seed 9's building (K = 3) and judged it on world seed 11 (record
+seed 12). World seeds 12 and up have not been looked at: the next change must be judged on
+them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised

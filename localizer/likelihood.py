@@ -311,6 +311,9 @@ class CalibrationSamples:
         standout_min_inliers: float = 5.0,
         standout_factor: float = 2.0,
         standout_fraction: float = 0.25,
+        far_standout_min_inliers: float = 10.0,
+        far_standout_factor: float = 4.0,
+        far_standout_fraction: float = 0.1,
         alike: Sequence[Collection[str]] = (),
         declared: Iterable[tuple[str, str]] = (),
         edges: Iterable[tuple[str, str]] = (),
@@ -351,7 +354,14 @@ class CalibrationSamples:
         out), one seen through two doors is seen with the room between them; a twin stands
         out alone (bare twin bedrooms recorded three places each: bedroom_b's views found
         bedroom_a at 11.7, 12.1 and 4.2 spread inliers against their own room's 25, 23 and
-        14, no other room above 2.3; bedroom_a's views found bedroom_b at 15.0, 2.9 and 2.2)."""
+        14, no other room above 2.3; bedroom_a's views found bedroom_b at 15.0, 2.9 and 2.2).
+        A room also stands out **far above chance** at a lower share of the own room's count:
+        at least ``far_standout_min_inliers``, ``far_standout_fraction`` of the own room's
+        count and ``far_standout_factor`` times every room but the two
+        (office_a recorded three places a metre apart explains its own views at 96–113 spread
+        inliers, and office_b stands at 14–25 in each of them, no other room above 4; left
+        unpaired, 10 of 20 kidnappings into the offices came out sure and wrong, the twin whose
+        place stood nearer the robot winning by up to four times the count)."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
         by_count: Counter[tuple[str, str]] = Counter()
@@ -378,9 +388,15 @@ class CalibrationSamples:
                     and frozenset((own_room, room)) not in adjacent
                 )
                 outdone[(own_room, room)] += one_side and counted and count >= own
-                standing_out[(own_room, room)] += one_side and count >= max(
+                near = count >= max(
                     standout_min_inliers, standout_factor * others_max, standout_fraction * own
                 )
+                far = count >= max(
+                    far_standout_min_inliers,
+                    far_standout_factor * others_max,
+                    far_standout_fraction * own,
+                )
+                standing_out[(own_room, room)] += one_side and (near or far)
                 if counted or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only

@@ -219,6 +219,38 @@ def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_
     assert samples.lookalike_pairs == (("office_a", "office_b"),)
 
 
+def test_a_twin_far_above_chance_in_every_view_is_a_look_alike_at_a_fifth_of_the_count():
+    from localizer.likelihood import CalibrationSamples
+
+    # a map recorded with three places per office (world seed 9): each office wins its own
+    # views by four to six times, the twin stands at 14-31, every room but the corridor at 0-5
+    sizes = {"corridor": 3, "kitchen": 3, "office_a": 3, "office_b": 3, "seminar": 3}
+    queries = [
+        ("office_a", {"corridor": 4, "kitchen": 1, "office_a": 113, "office_b": 21, "seminar": 3}),
+        ("office_a", {"corridor": 4, "kitchen": 1, "office_a": 113, "office_b": 25, "seminar": 2}),
+        ("office_a", {"corridor": 3, "office_a": 96, "office_b": 14, "seminar": 1}),
+        ("office_b", {"corridor": 2, "kitchen": 2, "office_a": 31, "office_b": 88, "seminar": 2}),
+        ("office_b", {"corridor": 2, "kitchen": 1, "office_a": 16, "office_b": 88, "seminar": 2}),
+        ("office_b", {"corridor": 24, "kitchen": 5, "office_a": 8, "office_b": 47, "seminar": 1}),
+    ]
+    edges = [("corridor", "office_a"), ("corridor", "office_b"), ("corridor", "kitchen")]
+    samples = CalibrationSamples.from_queries(queries, sizes, edges=edges)
+    assert samples.lookalike_pairs == (("office_a", "office_b"),)
+    assert samples.pair_tests == ("standout",)
+
+
+def test_a_room_at_a_few_percent_of_the_own_count_is_no_look_alike_however_far_above_chance():
+    from localizer.likelihood import CalibrationSamples
+
+    sizes = {"kitchen": 3, "office_a": 3, "seminar": 3}
+    queries = [
+        ("kitchen", {"kitchen": 150.0, "office_a": 12.0, "seminar": 1.0}),
+        ("kitchen", {"kitchen": 140.0, "office_a": 11.0, "seminar": 2.0}),
+        ("office_a", {"office_a": 120.0, "kitchen": 3.0, "seminar": 2.0}),
+    ]
+    assert CalibrationSamples.from_queries(queries, sizes).lookalike_pairs == ()
+
+
 def test_a_room_no_query_came_from_is_no_look_alike_but_is_named_to_ask():
     from localizer.likelihood import CalibrationSamples
 
