@@ -192,7 +192,8 @@ def test_a_robot_adds_to_the_site_map(site) -> None:
 def test_a_robot_serves_its_own_keys(site) -> None:
     router, _ = site
     serve_belief(router.login("r2"), "toploc/r2/localizer/belief")
-    assert wait_for(lambda: reached(router.login("ops"), "toploc/r2/localizer/belief"), 5.0)
+    ops = router.login("ops")
+    assert wait_for(lambda: reached(ops, "toploc/r2/localizer/belief"), 5.0)
 
 
 def test_a_robot_cannot_serve_another_robots_keys(site) -> None:
@@ -216,7 +217,8 @@ def test_without_the_access_control_the_impostor_is_reached(tmp_path) -> None:
     router = SiteRouter(tmp_path, access_control=False)
     try:
         serve_belief(router.login("r1"), "toploc/r2/localizer/belief")
-        assert wait_for(lambda: reached(router.login("ops"), "toploc/r2/localizer/belief"), 5.0)
+        ops = router.login("ops")
+        assert wait_for(lambda: reached(ops, "toploc/r2/localizer/belief"), 5.0)
     finally:
         router.close()
 
@@ -224,13 +226,15 @@ def test_without_the_access_control_the_impostor_is_reached(tmp_path) -> None:
 def test_a_viewer_reads_a_robots_belief(site) -> None:
     router, _ = site
     serve_belief(router.login("r1"), "toploc/r1/localizer/belief")
-    assert wait_for(lambda: reached(router.login("watcher"), "toploc/r1/localizer/belief"), 5.0)
+    watcher = router.login("watcher")
+    assert wait_for(lambda: reached(watcher, "toploc/r1/localizer/belief"), 5.0)
 
 
 def test_a_viewer_cannot_drive_a_robot(site) -> None:
     router, _ = site
     serve_belief(router.login("r1"), "toploc/r1/homing/goal")
-    assert wait_for(lambda: reached(router.login("ops"), "toploc/r1/homing/goal"), 5.0)
+    ops = router.login("ops")
+    assert wait_for(lambda: reached(ops, "toploc/r1/homing/goal"), 5.0)
     viewer = HomingClient(router.login("watcher"), "r1", timeout_s=1.5)
     with pytest.raises(bus.BusTimeout, match="r1/homing/goal: no reply"):
         viewer.goal(3, timeout_s=0.0)
