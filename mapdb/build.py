@@ -34,7 +34,7 @@ from mapdb.database import MapDatabase
 from mapdb.dataset import ManifestEntry, NotARegularFileError, sha256_file
 from mapdb.errors import BuildAbortedError, DuplicatePlaceError
 from mapdb.records import Fingerprint, NewPlace
-from mapdb.workers import deferred_signals, spawn_process_pool, stop_workers
+from mapdb.workers import WorkerDiedError, deferred_signals, spawn_process_pool, stop_workers
 
 Extractor = Callable[[Path], list[Fingerprint]]
 
@@ -216,6 +216,8 @@ def _extract_parallel(
             while in_flight:
                 done, _ = wait(in_flight, timeout=SIGNAL_POLL_S, return_when=FIRST_COMPLETED)
                 check_signals()
+                if not done:  # what has come is written first
+                    pool.check_workers()
                 for future in done:
                     job = in_flight.pop(future)
                     submit_next()
@@ -275,8 +277,9 @@ def build_map(
             report.interrupted = True
         except BrokenProcessPool as error:
             added = report.count(Status.ADDED)
+            how = f": {error}" if isinstance(error, WorkerDiedError) else f" ({error})"
             raise BuildAbortedError(
-                f"a feature-extraction worker process died ({error}); the {added} places "
+                f"a feature-extraction worker process died{how}; the {added} places "
                 f"added to {map_db.path} are complete: re-run the build to continue",
                 map_db.path,
             ) from error

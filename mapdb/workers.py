@@ -15,6 +15,13 @@ starts workers in the thread that calls ``submit``: submit from a thread that ou
 Workers ignore ``SIGINT`` and ``SIGTERM``: Ctrl-C in a terminal, and a service manager's stop,
 reach the whole process group, and the parent alone decides what an interrupt means (it stops
 the pool, see :func:`stop_workers`).
+
+A worker that dies while the pool runs (the kernel's out-of-memory killer, a ``kill -9``, a
+crash in OpenCV) is noticed by :meth:`WorkerPool.check_workers`, which the caller's wait loop
+calls between two waits (:func:`results_in_order` does): the pool is stopped and
+:class:`WorkerDiedError` names the worker and how it ended. The pool itself notices a dead
+worker only when it is not reading a result: one killed half-way through sending its result
+leaves every future pending for ever (see :func:`stop_workers`).
 """
 
 from __future__ import annotations
@@ -26,16 +33,48 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from types import FrameType, TracebackType
+from typing import TypeVar
+
+T = TypeVar("T")
 
 PR_SET_PDEATHSIG = 1
 """``prctl`` option: the signal the kernel sends a process when its parent ends (Linux)."""
 
 PARENT_POLL_S = 0.2
 """How often a worker's watcher thread checks that its parent is still alive, seconds."""
+
+RESULT_POLL_S = 0.5
+"""How long :func:`results_in_order` waits for a result before it checks the workers, seconds."""
+
+
+class WorkerDiedError(BrokenProcessPool):
+    """A pool worker ended while the pool was running; the pool has been stopped.
+
+    ``pid`` and ``exitcode`` are the worker's (a negative exit code is the signal that ended it,
+    as in :attr:`multiprocessing.Process.exitcode`).
+    """
+
+    def __init__(self, pid: int, exitcode: int) -> None:
+        self.pid, self.exitcode = pid, exitcode
+        super().__init__(f"process {pid} {describe_exit(exitcode)}")
+
+
+def describe_exit(exitcode: int) -> str:
+    """How a process with this :attr:`~multiprocessing.Process.exitcode` ended, in words."""
+    if exitcode >= 0:
+        return f"exited with status {exitcode}"
+    try:
+        name = signal.Signals(-exitcode).name
+    except ValueError:
+        name = f"signal {-exitcode}"
+    if -exitcode == signal.SIGKILL:
+        return f"was killed by {name} (the out-of-memory killer, or a kill -9)"
+    return f"was ended by {name}"
 
 
 def _set_parent_death_signal() -> None:
@@ -104,7 +143,21 @@ def stop_workers(pool: ProcessPoolExecutor) -> None:
 
 class WorkerPool(ProcessPoolExecutor):
     """A spawned ``ProcessPoolExecutor`` whose ``with`` block kills its workers on an error or
-    interrupt instead of waiting for every queued task."""
+    interrupt instead of waiting for every queued task, and that can tell when a worker died
+    (:meth:`check_workers`)."""
+
+    def check_workers(self) -> None:
+        """Raise :class:`WorkerDiedError` if a worker has ended, after stopping the pool.
+
+        Call it while results are awaited: workers end only at shutdown (the pool starts no
+        replacement and none retires after some tasks), so an ended worker means one died, and
+        the pool may never say so itself (a result half sent, see :func:`stop_workers`).
+        """
+        for pid, process in dict(getattr(self, "_processes", None) or {}).items():
+            exitcode = process.exitcode
+            if exitcode is not None:
+                stop_workers(self)
+                raise WorkerDiedError(pid, exitcode)
 
     def __exit__(
         self,
@@ -132,6 +185,21 @@ def spawn_process_pool(max_workers: int) -> WorkerPool:
         initializer=init_worker,
         initargs=(os.getpid(),),
     )
+
+
+def results_in_order(pool: WorkerPool, futures: Sequence[Future[T]]) -> Iterator[T]:
+    """Each future's result, in the order given, checking the workers between waits of
+    :data:`RESULT_POLL_S`: :class:`WorkerDiedError` when one died, instead of waiting for ever.
+    An exception raised by the task itself is raised as :meth:`Future.result` raises it."""
+    for future in futures:
+        while True:
+            try:
+                result = future.result(timeout=RESULT_POLL_S)
+            except TimeoutError:
+                pool.check_workers()
+                continue
+            yield result
+            break
 
 
 @contextmanager

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
+import struct
+import sys
 import time
 from pathlib import Path
 
@@ -69,4 +72,20 @@ def crashing_extract(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
     """``fake_extract``, except that the worker process dies on images named ``*_003.png``."""
     if Path(path).name.endswith("_003.png"):
         os._exit(3)
+    return fake_extract(path, presets)
+
+
+def half_sending_extract(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
+    """``fake_extract``, except that on images named ``*_003.png`` the worker dies half-way
+    through sending a result, as one the out-of-memory killer ends between the two writes of a
+    large result: a length goes into the pool's result pipe, then ``SIGKILL``. The length, 1 GiB,
+    is more than the other workers' results will fill, so the pool's reader never gets to the
+    end of it (a short one is filled by the next results, which then fail to unpickle)."""
+    if Path(path).name.endswith("_003.png"):
+        frame = sys._getframe()
+        while "result_queue" not in frame.f_locals:  # concurrent.futures' worker loop holds it
+            frame = frame.f_back  # type: ignore[assignment]
+        writer = frame.f_locals["result_queue"]._writer
+        os.write(writer.fileno(), struct.pack("!i", 2**30))
+        os.kill(os.getpid(), signal.SIGKILL)
     return fake_extract(path, presets)

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import functools
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -148,5 +151,49 @@ def test_dead_worker_aborts_cleanly_and_rerun_completes(
         build_map(map_db, entries, crashing, workers=2, progress=False)
     assert_consistent(db_path)
     rerun = build_map(map_db, entries, EXTRACT, workers=2, progress=False)
+    assert rerun.ok
+    assert table_counts(db_path)["places"] == 8
+
+
+HALF_SENDING_BUILD = """
+import functools, sys
+from pathlib import Path
+from mapdb_fake_extractor import half_sending_extract
+from mapdb.build import build_map
+from mapdb.database import MapDatabase
+from mapdb.dataset import read_manifest
+from mapdb.errors import BuildAbortedError
+
+extract = functools.partial(half_sending_extract, presets=("sift", "mser"))
+with MapDatabase.open(Path(sys.argv[2])) as map_db:
+    try:
+        build_map(map_db, read_manifest(Path(sys.argv[1])), extract, workers=2, progress=False)
+    except BuildAbortedError as error:
+        print(error)
+"""
+
+
+def test_a_worker_killed_while_sending_its_result_aborts_the_build(
+    make_dataset, db_path: Path
+) -> None:
+    """The out-of-memory killer may end a worker between the two writes of a large result; the
+    pool then never says so, and the build used to wait for ever (run in a subprocess, so a
+    hang fails this test instead of the suite)."""
+    dataset = make_dataset(8)
+    here = Path(__file__).resolve().parent
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(here.parents[1]), str(here)])}
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", HALF_SENDING_BUILD, str(dataset), str(db_path)],
+            env=env, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail("the build did not end: it is waiting for a result that never comes")
+    assert done.returncode == 0, done.stderr
+    assert "worker process died: process" in done.stdout
+    assert "was killed by SIGKILL" in done.stdout and "re-run the build" in done.stdout
+    assert_consistent(db_path)
+    with MapDatabase.open(db_path) as map_db:
+        rerun = build_map(map_db, read_manifest(dataset), EXTRACT, workers=2, progress=False)
     assert rerun.ok
     assert table_counts(db_path)["places"] == 8

@@ -1,6 +1,7 @@
 """``deferred_signals``: Ctrl-C during a parallel build is raised where the build checks for it,
 never inside the process pool's own code. ``stop_workers``: a process whose pool was stopped
-exits, even when a killed worker left half a result in the pool's pipe."""
+exits, even when a killed worker left half a result in the pool's pipe. ``results_in_order``: a
+worker that dies while results are awaited is named, instead of a wait for ever."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from mapdb.workers import deferred_signals
+from mapdb.workers import deferred_signals, describe_exit
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -29,6 +30,36 @@ pool.submit(time.sleep, 60)
 os.write(pool._result_queue._writer.fileno(), struct.pack("!i", 26135))
 stop_workers(pool)
 """
+
+
+KILLED_WHILE_SENDING = """
+import os, signal, struct, time
+from mapdb.workers import WorkerDiedError, results_in_order, spawn_process_pool
+
+pool = spawn_process_pool(1)
+(pid,) = results_in_order(pool, [pool.submit(os.getpid)])  # the worker is up
+sleeping = pool.submit(time.sleep, 60)
+# half a result in the pipe (see HALF_SENT_RESULT), and then the worker is killed
+os.write(pool._result_queue._writer.fileno(), struct.pack("!i", 26135))
+os.kill(pid, signal.SIGKILL)
+try:
+    list(results_in_order(pool, [sleeping]))
+except WorkerDiedError as error:
+    print(f"{error} | pid {error.pid == pid} | exitcode {error.exitcode}")
+"""
+
+
+def run_python(code: str) -> subprocess.CompletedProcess[str]:
+    """``code`` in a fresh interpreter with the repository on its path; fails the test if it
+    has not exited within 30 s."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    try:
+        return subprocess.run(
+            [sys.executable, "-c", code], env=env, cwd=REPO, capture_output=True, text=True,
+            timeout=30,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail("the process did not exit: it is still waiting for its pool")
 
 
 @pytest.fixture(autouse=True)
@@ -139,3 +170,25 @@ def test_a_stopped_pool_whose_pipe_holds_half_a_result_lets_the_process_exit() -
     except subprocess.TimeoutExpired:
         pytest.fail("the process did not exit: the pool's manager thread is still reading")
     assert done.returncode == 0, done.stderr.decode()
+
+
+def test_a_worker_killed_while_sending_a_result_is_named_instead_of_awaited_for_ever() -> None:
+    """Before ``check_workers`` the pool's manager thread read for ever, and every future of the
+    pool, the sleeping one too, stayed pending: a map build that never ended."""
+    done = run_python(KILLED_WHILE_SENDING)
+    assert done.returncode == 0, done.stderr
+    assert "was killed by SIGKILL (the out-of-memory killer, or a kill -9)" in done.stdout
+    assert "| pid True | exitcode -9" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("exitcode", "words"),
+    [
+        (3, "exited with status 3"),
+        (-signal.SIGKILL, "was killed by SIGKILL (the out-of-memory killer, or a kill -9)"),
+        (-signal.SIGSEGV, "was ended by SIGSEGV"),
+        (-200, "was ended by signal 200"),
+    ],
+)
+def test_how_a_worker_ended_is_said_in_words(exitcode: int, words: str) -> None:
+    assert describe_exit(exitcode) == words

@@ -90,7 +90,7 @@ from localizer.verification import (
 from localizer.visual_homing import signed_pose_direction_rad
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
-from mapdb.workers import spawn_process_pool
+from mapdb.workers import results_in_order, spawn_process_pool
 
 METHODS: tuple[str, ...] = (
     "thesis",
@@ -203,8 +203,8 @@ def extract_fingerprints(
         with spawn_process_pool(workers) as pool:
             futures = [pool.submit(_extract_one, path, settings) for path in paths]
             results = []
-            for future in futures:
-                results.append(future.result())
+            for result in results_in_order(pool, futures):
+                results.append(result)
                 bar.update()
             return results
     finally:

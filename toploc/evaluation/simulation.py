@@ -18,7 +18,7 @@ from tqdm import tqdm
 from homing.thesis.experiments import WORLDS, Method, Setting, run_row, run_setting, settings
 from homing.thesis.report import agreement
 from homing.thesis.simulation import SimulationParams
-from mapdb.workers import spawn_process_pool
+from mapdb.workers import results_in_order, spawn_process_pool
 
 # Runs per world whose trajectories are drawn (a plot of more is unreadable).
 TRACK_RUNS = 5
@@ -81,7 +81,7 @@ def run_simulation(
     rows: list[dict[str, Any]] = []
     if jobs > 1:
         with spawn_process_pool(jobs) as pool:  # the CLI process has imported OpenCV
-            for row in pool.map(run_row, tasks, chunksize=4):
+            for row in results_in_order(pool, [pool.submit(run_row, task) for task in tasks]):
                 rows.append(row)
                 bar.update()
     else:
