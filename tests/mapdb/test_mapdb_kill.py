@@ -69,8 +69,11 @@ def test_signal_mid_build_then_rerun_completes(
             assert time.monotonic() < deadline, "the build did not start writing in time"
             time.sleep(0.02)
         os.killpg(process.pid, signum)  # the whole group, as a terminal's Ctrl-C does
-    finally:
         stdout, _ = process.communicate(timeout=20)
+    finally:
+        if process.poll() is None:  # a failed wait above: leave no build or worker behind
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
     if signum == signal.SIGKILL:
         assert process.returncode == -signal.SIGKILL
     else:
