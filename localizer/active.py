@@ -26,6 +26,15 @@ HOMING_STAY_PROBABILITY = 0.98
 CANCELLED = "cancelled"
 """The :attr:`HomingResult.reason` of a drive someone cancelled: no further drive follows."""
 
+ENDINGS: dict[str, str] = {
+    "settled": "the belief is no longer ambiguous",
+    "lost": "the robot, lost, looked elsewhere and still matched no room",
+    "no-telling-place": "the policy has no place left that tells the likely rooms apart",
+    "drive-limit": "the robot made the drives it may make (ActiveParams.max_targets)",
+    CANCELLED: "a drive was cancelled",
+}
+"""Why an active localization ended (:attr:`ActiveResult.ended`), with what each means."""
+
 
 @dataclass(frozen=True)
 class ActiveParams:
@@ -72,7 +81,9 @@ class Visit:
 class ActiveResult:
     """How an active localization went: the first and final beliefs, every visit, the
     frames used (captures that went into the belief or into homing), the distance driven
-    (odometric, metres) and how many times the robot, lost, stepped away to look again."""
+    (odometric, metres), how many times the robot, lost, stepped away to look again, and why
+    it ended (a key of :data:`ENDINGS`: an ambiguous belief with ``"no-telling-place"`` is
+    look-alike rooms that the map has no place to tell apart)."""
 
     first: RoomBelief
     final: RoomBelief
@@ -80,6 +91,7 @@ class ActiveResult:
     frames: int
     distance_m: float
     looks_elsewhere: int = 0
+    ended: str = "settled"
 
 
 def active_step(
@@ -162,6 +174,7 @@ def localize_actively(
             len(visits),
         )
         if target is None:
+            ended = _ending(belief, len(visits), params.max_targets)
             break
         context = context.trying(target)
         for same_spot in localizer.same_spot_places(target):  # looked at from there already
@@ -180,5 +193,16 @@ def localize_actively(
         notify(belief)
         visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
         if homing.reason == CANCELLED:
+            ended = CANCELLED
             break
-    return ActiveResult(first, belief, tuple(visits), frames, distance, looks_elsewhere)
+    return ActiveResult(first, belief, tuple(visits), frames, distance, looks_elsewhere, ended)
+
+
+def _ending(belief: RoomBelief, drives: int, max_targets: int) -> str:
+    """Why the loop stopped asking for a drive (see :func:`active_step`): a key of
+    :data:`ENDINGS`."""
+    if belief.state is LocalizationState.LOST:
+        return "lost"
+    if belief.state is not LocalizationState.AMBIGUOUS:
+        return "settled"
+    return "drive-limit" if drives >= max_targets else "no-telling-place"

@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any
 
-from localizer.active import ActiveParams, localize_actively
+from localizer.active import ActiveParams, ActiveResult, localize_actively
 from localizer.belief import RoomBelief
 from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
@@ -186,6 +186,7 @@ class LocalizationRunner:
         localizer = self.localizer  # NoPlacesYetError at once, not after waiting
         self._wait_for_turn(deadline_s)
         start_s = time.monotonic()
+        summary: dict[str, Any] | None = None
         try:
             localizer = self.localizer  # replaced while this one waited
             if active:
@@ -198,12 +199,13 @@ class LocalizationRunner:
                     home=self.home,
                 )
                 belief = result.final
+                summary = active_summary(result)
             else:
                 observation = localizer.observe(self.robot.capture().image)
                 belief = localizer.update(observation)
             self._set(belief)
-            _log_localization(active, belief, time.monotonic() - start_s)
-            return self.belief()
+            _log_localization(belief, time.monotonic() - start_s, summary)
+            return self.belief() | ({"active": summary} if summary is not None else {})
         finally:
             self._run_lock.release()
 
@@ -280,16 +282,37 @@ class LocalizationRunner:
         return self.belief()
 
 
-def _log_localization(active: bool, belief: RoomBelief, elapsed_s: float) -> None:
+def active_summary(result: ActiveResult) -> dict[str, Any]:
+    """What a client is told of an active localization beside its belief (the ``active``
+    field of the ``localizer/localize`` reply): drives, distance (odometric, metres) and why
+    it ended (a key of :data:`localizer.active.ENDINGS`)."""
+    return {
+        "drives": len(result.visits),
+        "distance_m": round(result.distance_m, 3),
+        "ended": result.ended,
+    }
+
+
+def _log_localization(
+    belief: RoomBelief, elapsed_s: float, summary: Mapping[str, Any] | None = None
+) -> None:
     """One INFO line per localization: its kind, state, top room and probability, the best
-    place's inliers and how long it took (milliseconds, from its turn to its belief)."""
+    place's inliers and how long it took (milliseconds, from its turn to its belief); for an
+    active one also its drives, distance and why it ended."""
     room, probability = belief.top
+    active = (
+        ""
+        if summary is None
+        else f", {summary['drives']} drives, {summary['distance_m']:.2f} m, "
+        f"ended: {summary['ended']}"
+    )
     _log.info(
-        "localization (%s): %s, top %s %.3f, %s inliers, %.0f ms",
-        "active" if active else "passive",
+        "localization (%s): %s, top %s %.3f, %s inliers, %.0f ms%s",
+        "passive" if summary is None else "active",
         belief.state,
         room,
         probability,
         belief.best_place_inliers or 0,
         1000 * elapsed_s,
+        active,
     )

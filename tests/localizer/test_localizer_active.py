@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import ActiveParams, localize_actively
+from localizer.active import CANCELLED, ENDINGS, ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
@@ -31,6 +31,7 @@ def test_a_robot_kidnapped_into_a_look_alike_office_ends_localized_there(localiz
     result = localize_actively(localizer, robot, policy, on_belief=beliefs.append)
     assert result.final.top[0] == "office_b"
     assert result.final.state is LocalizationState.LOCALIZED
+    assert result.ended == "settled"
     assert beliefs[0] == result.first and beliefs[-1] == result.final
     assert result.frames >= 1 + len(result.visits)
     if result.first.state is LocalizationState.AMBIGUOUS:
@@ -65,6 +66,7 @@ def test_a_lost_robot_steps_away_and_looks_again_before_it_gives_up(localizer):
     assert result.final.state is LocalizationState.LOST
     assert robot.moves == result.looks_elsewhere == 3
     assert result.visits == () and result.frames == 4
+    assert result.ended == "lost"
 
 
 def test_a_lost_robot_allowed_no_look_elsewhere_does_not_move(localizer):
@@ -114,6 +116,34 @@ def test_no_targets_allowed_means_no_drive(localizer):
     robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
     result = localize_actively(localizer, robot, "most-likely", ActiveParams(max_targets=0))
     assert result.visits == () and robot.distance_driven_m == 0
+    assert result.first.state is LocalizationState.AMBIGUOUS
+    assert result.ended == "drive-limit"
+
+
+class NowherePolicy:
+    """A policy that finds no place telling the rooms apart (twins without counterparts)."""
+
+    name = "nowhere"
+
+    def choose(self, belief, evidence, places, context) -> None:
+        return None
+
+
+def test_an_ambiguous_belief_with_no_telling_place_says_so(localizer):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
+    result = localize_actively(localizer, robot, NowherePolicy())
+    assert result.final.state is LocalizationState.AMBIGUOUS and result.visits == ()
+    assert result.ended == "no-telling-place" and result.ended in ENDINGS
+
+
+def test_a_cancelled_drive_ends_the_localization_and_says_so(localizer):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
+
+    def cancelled(place_id: int) -> HomingResult:
+        return HomingResult(False, 0, 0.0, CANCELLED, localizer.map.fingerprint(place_id))
+
+    result = localize_actively(localizer, robot, "most-likely", home=cancelled)
+    assert len(result.visits) == 1 and result.ended == CANCELLED
 
 
 def test_an_unknown_policy_is_refused_by_name(localizer):

@@ -51,3 +51,23 @@ def test_an_ambiguous_belief_lists_its_top_rooms():
 def test_the_demo_counts_a_lost_final_belief_as_wrong_whatever_room_is_first():
     assert verdict(LOST, "office_b") == "WRONG"
     assert verdict(belief("localized", {"office_b": 0.97, "office_a": 0.03}), "office_b") == "right"
+
+
+def test_an_active_reply_says_how_many_drives_and_why_it_ended():
+    settled = belief("localized", {"office_a": 0.03, "office_b": 0.97})
+    settled["active"] = {"drives": 2, "distance_m": 1.894, "ended": "settled"}
+    assert format_belief(settled).splitlines()[3] == "active: 2 drives, 1.89 m; settled"
+
+
+def test_twins_with_no_telling_place_get_a_hint_of_what_to_record():
+    twins = belief("ambiguous", {"office_a": 0.5, "office_b": 0.5, "kitchen": 0.0})
+    twins["active"] = {"drives": 0, "distance_m": 0.0, "ended": "no-telling-place"}
+    lines = format_belief(twins).splitlines()
+    assert lines[3] == "active: 0 drives, 0.00 m; no place of the map tells office_a from office_b"
+    assert "toploc map info" in lines[4]
+
+
+def test_an_ending_this_version_does_not_know_is_shown_as_it_came():
+    odd = belief("ambiguous", {"office_a": 0.5, "office_b": 0.5})
+    odd["active"] = {"drives": 1, "distance_m": 0.5, "ended": "battery {low}"}
+    assert format_belief(odd).splitlines()[3] == "active: 1 drive, 0.50 m; battery {low}"

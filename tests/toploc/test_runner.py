@@ -13,6 +13,7 @@ from bus_helpers import free_endpoint
 from click.testing import CliRunner
 from robot_helpers import RobotWrapper
 
+from localizer.active import ENDINGS
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Pose2D
 from mapdb.loading import load_snapshot
@@ -90,6 +91,17 @@ def test_a_passive_localize_publishes_a_belief_in_the_bus_format(loaded):
     assert published[-1] == belief
 
 
+def test_an_active_localize_replies_how_it_went_beside_its_belief(loaded):
+    published = []
+    runner = LocalizationRunner(Localizer(loaded), robot_in("kitchen", 2.0, 3.0))
+    runner.publish = published.append
+    reply = runner.localize(active=True)
+    assert check_belief("test", reply)["active"] == reply["active"]
+    assert set(reply["active"]) == {"drives", "distance_m", "ended"}
+    assert reply["active"]["ended"] in ENDINGS
+    assert "active" not in runner.belief()
+
+
 def test_belief_answers_and_reset_is_refused_while_a_localization_runs(loaded):
     robot = GatedRobot(robot_in("kitchen", 2.0, 3.0))
     runner = LocalizationRunner(Localizer(loaded), robot)
@@ -118,6 +130,20 @@ def test_the_service_localizes_over_zenoh_for_a_client_session(building_map):
         assert max(belief["rooms"], key=belief["rooms"].get) == "seminar"
         assert client.belief() == belief
         assert client.reset({"kitchen": 1.0})["rooms"]["kitchen"] == 1.0
+
+
+def test_a_client_is_told_how_an_active_localization_went_and_the_belief_is_not(building_map):
+    endpoint = free_endpoint()
+    service = BusConfig(robot_id="r8", listen=(endpoint,))
+    client_config = BusConfig(robot_id="r8", listen=(), connect=(endpoint,))
+    with (
+        start_service(building_map[0], service, robot_in("kitchen", 2.0, 3.0)),
+        open_session(client_config) as s,
+    ):
+        client = LocalizerClient(s, "r8", timeout_s=5.0)
+        reply = client.localize(active=True)
+        assert reply["active"]["ended"] in ENDINGS
+        assert "active" not in client.belief()
 
 
 def test_the_demo_runs_end_to_end_on_a_cached_map(building_map, tmp_path, monkeypatch):

@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING, Any
 from localizer.belief import RoomBelief
 from localizer.robot_protocol import Pose2D
 from toploc.bus.errors import BusMessageError
-from toploc.bus.json_codec import has_type
-from toploc.bus.schemas import BELIEF
+from toploc.bus.json_codec import check_fields, has_type
+from toploc.bus.schemas import ACTIVE, BELIEF
 
 if TYPE_CHECKING:
     from localizer.visual_homing import HomingProgress, HomingResult
@@ -37,7 +37,8 @@ def odometry_from_fields(message: Mapping[str, Any]) -> Pose2D:
 
 def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
     """The belief message (``RoomBelief.to_json()``) ``belief`` stands for, checked field by
-    field, with the optional ``stale`` (bool) and ``age_s`` (a number >= 0, or null) kept;
+    field, with the optional ``stale`` (bool), ``age_s`` (a number >= 0, or null),
+    ``map_age_s`` and ``active`` (:data:`~toploc.bus.schemas.ACTIVE`'s fields) kept;
     :class:`~toploc.bus.errors.BusMessageError` prefixed ``where`` naming the bad field."""
     try:
         checked = RoomBelief.from_json(belief).to_json()
@@ -46,6 +47,8 @@ def check_belief(where: str, belief: Mapping[str, Any]) -> dict[str, Any]:
     BELIEF.check_optional(where, belief)
     if belief.get("age_s") is not None and belief["age_s"] < 0:
         raise BusMessageError(f"{where}: field 'age_s' must be >= 0, got {belief['age_s']!r}")
+    if "active" in belief:
+        check_fields(f"{where}: field 'active'", belief["active"], ACTIVE.fields)
     return {**checked, **{k: belief[k] for k in BELIEF.optional if k in belief}}
 
 

@@ -70,12 +70,18 @@ CAPTURE = Schema(
 # --- the localizer: toploc.nodes.localizer --------------------------------------------------
 
 BELIEF = Schema(
-    "belief", optional={"stale": bool, "age_s": (float, NULL), "map_age_s": (float, NULL)}
+    "belief",
+    optional={"stale": bool, "age_s": (float, NULL), "map_age_s": (float, NULL), "active": dict},
 )
 """``localizer/belief``: :meth:`localizer.belief.RoomBelief.to_json`'s fields, checked by
 :func:`toploc.bus.messages.check_belief`; a stale belief adds ``stale`` and ``age_s``, a
 localizer on a replica of a site map ``map_age_s`` (seconds since the replica last confirmed
-it was the map's current version; null: never)."""
+it was the map's current version; null: never); the reply to an active ``localize`` adds
+``active`` (:data:`ACTIVE`)."""
+
+ACTIVE = Schema("active", {"drives": int, "distance_m": float, "ended": str})
+"""The ``active`` field of an active ``localize`` reply (:func:`toploc.runner.active_summary`):
+drives, odometric metres, and why it ended (a key of :data:`localizer.active.ENDINGS`)."""
 LOCALIZE = Schema("localize", optional={"active": bool, "timeout_s": float})
 """``localizer/localize`` request (optional: no payload at all is a passive localize)."""
 RESET = Schema("reset", optional={"prior": dict})

@@ -45,10 +45,48 @@ def state_line(belief: Mapping[str, Any], top: int = 3) -> str:
     return f"{state}: {rooms or 'no rooms'}"
 
 
+ENDED_WORDS: dict[str, str] = {
+    "settled": "settled",
+    "lost": "still lost after looking elsewhere",
+    "no-telling-place": "no place of the map tells {first} from {second}",
+    "drive-limit": "the drives allowed are made",
+    "cancelled": "a drive was cancelled",
+}
+"""How ``toploc belief --active`` says why the localization ended (the reply's ``active``
+``ended``; :data:`localizer.active.ENDINGS`)."""
+
+NO_TELLING_PLACE_HINT = (
+    "  (look-alike rooms with no places at the same spot of both: `toploc map info` says "
+    "what to record)"
+)
+
+
+def active_line(belief: Mapping[str, Any]) -> str | None:
+    """The line an active localization's reply adds: ``active: 2 drives, 1.89 m; settled``;
+    None for a belief without ``active``. An ending this version does not know is shown as
+    it came."""
+    summary = belief.get("active")
+    if summary is None:
+        return None
+    ranked = [*ranked_rooms(belief), ("?", 0.0), ("?", 0.0)]
+    ended = summary["ended"]
+    words = (
+        ENDED_WORDS[ended].format(first=ranked[0][0], second=ranked[1][0])
+        if ended in ENDED_WORDS
+        else ended
+    )
+    drives = summary["drives"]
+    return (
+        f"active: {drives} drive{'' if drives == 1 else 's'}, "
+        f"{summary['distance_m']:.2f} m; {words}"
+    )
+
+
 def format_belief(belief: Mapping[str, Any], top: int | None = None) -> str:
-    """Several lines: :func:`state_line`, entropy and stamp, the best place, then the rooms by
-    probability with a bar each (the ``top`` first; all if None). A lost belief lists no
-    rooms: it is not an answer."""
+    """Several lines: :func:`state_line`, entropy and stamp, the best place, how an active
+    localization went (:func:`active_line`, with a hint when no place tells the top rooms
+    apart), then the rooms by probability with a bar each (the ``top`` first; all if None). A
+    lost belief lists no rooms: it is not an answer."""
     best = belief["best_place"]
     best_text = (
         "none"
@@ -60,6 +98,11 @@ def format_belief(belief: Mapping[str, Any], top: int | None = None) -> str:
         f"entropy {belief['entropy_bits']:.3f} bits   stamp {belief['stamp']:.3f} s",
         f"best place: {best_text}",
     ]
+    active = active_line(belief)
+    if active is not None:
+        lines.append(active)
+        if belief["active"]["ended"] == "no-telling-place":
+            lines.append(NO_TELLING_PLACE_HINT)
     if belief["state"] == "lost":
         return "\n".join(lines)
     rooms = ranked_rooms(belief)[:top]

@@ -15,7 +15,7 @@ import click
 
 from robot.worlds import make_world
 from toploc.bus import DEFAULT_ENDPOINT, BusConfig, BusError, open_session
-from toploc.commands.belief_text import state_line
+from toploc.commands.belief_text import active_line, state_line
 from toploc.commands.options import policy_option, robot_id_option, warn_if_exposed
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.nodes.localizer import LocalizerClient
@@ -75,6 +75,9 @@ def _client_run(session: Any, robot_id: str, true_room: str) -> None:
     client.subscribe(lambda belief: click.echo(belief_line(belief, t0)))
     final = client.localize(active=True)
     time.sleep(0.2)  # let the last publication print first
+    active = active_line(final)
+    if active is not None:
+        click.echo(active)
     click.echo(
         f"final: {state_line(final)}; the robot was kidnapped into {true_room}: "
         f"{verdict(final, true_room)}"

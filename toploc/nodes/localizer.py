@@ -166,8 +166,8 @@ class LocalizerNode(Node):
     def _belief_reply(self, belief: Mapping[str, Any], publish: bool) -> bus.Reply:
         where = f"{self.key(bus.LOCALIZER_BELIEF)}: the service returned a bad belief"
         checked = check_belief(where, belief)
-        if publish:
-            self.publish(checked)
+        if publish:  # the belief itself: how the localization that made it went is the reply's
+            self.publish({k: v for k, v in checked.items() if k != "active"})
         return bus.Reply(bus.encode_message(check_belief(where, self._marked(checked))))
 
     def _on_belief(self, _payload: bytes | None) -> bus.Reply:
