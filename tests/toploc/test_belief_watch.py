@@ -67,6 +67,14 @@ def test_a_block_shows_state_bars_best_place_and_the_drive():
     ]
 
 
+def test_the_reply_to_an_active_localization_says_how_it_went():
+    reply = {
+        **belief({"office_b": 0.97, "office_a": 0.03}, "localized"),
+        "active": {"drives": 2, "distance_m": 1.66, "ended": "settled"},
+    }
+    assert render_watch(reply)[-1] == "active: 2 drives, 1.66 m; settled"
+
+
 def test_a_stale_belief_and_an_ended_drive_say_so():
     stale = {**belief({"lab": 1.0}, "localized"), "stale": True, "age_s": 12.0}
     lines = render_watch(stale, progress(5, "arrived"))

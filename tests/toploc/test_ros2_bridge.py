@@ -56,6 +56,8 @@ class FakeService:
     def localize(self, active: bool, deadline_s: float | None = None) -> dict:
         self.calls.append(("localize", active))
         self.current = make_belief({"office_a": 0.9, "office_b": 0.1}, "localized", 2.0)
+        if active:  # what toploc.runner adds to an active localization's reply
+            return {**self.current, "active": {"drives": 2, "distance_m": 1.5, "ended": "settled"}}
         return self.current
 
     def reset(self, prior) -> dict:
@@ -251,6 +253,11 @@ def test_the_active_variant_localizes_actively(graph):
     reply = graph.call("/toploc/localize_active", trigger_request(), sequence=1)
     assert reply.ok is not None
     assert graph.service.calls == [("localize", True)]
+    response = ros_typestore().deserialize_cdr(
+        reply.ok.payload.to_bytes(), "std_srvs/msg/TriggerOut"
+    )
+    assert response.message.endswith("; 2 drives, 1.50 m, ended: settled")
+    assert "active" not in (graph.bridge.last_published or {})
 
 
 def test_reinitialize_global_localization_resets_to_uniform(graph):

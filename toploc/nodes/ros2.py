@@ -10,7 +10,8 @@ and a ROS 2 node named ``toploc`` on a second session, a peer of the robot's Zen
     /toploc/belief          toploc_msgs/msg/RoomBelief        the typed belief
     /toploc/pose            geometry_msgs/msg/PoseWithCovarianceStamped  the best place's pose
     /toploc/localize        std_srvs/srv/Trigger   localize once; message: state and room
-    /toploc/localize_active std_srvs/srv/Trigger   localize, driving to disambiguate
+    /toploc/localize_active std_srvs/srv/Trigger   localize, driving to disambiguate; message:
+                                                   also drives, metres and why it ended
     /toploc/reinitialize_global_localization  std_srvs/srv/Empty   a uniform belief
 
 Every topic is reliable, transient local, depth 1 (a late joiner gets the latest belief, as
@@ -229,11 +230,18 @@ class Ros2Bridge:
                 f"({bus.alive_key(self.robot_id, LOCALIZER_NODE)}): is toploc serve running?"
             )
         try:
-            belief = self.localizer.localize(active)
+            reply = self.localizer.localize(active)
         except bus.BusError as error:
             return self._fail(str(error))
+        how = reply.get("active")  # how an active localization went: the reply's, not a topic's
+        belief = {k: v for k, v in reply.items() if k != "active"}
         self.publish(belief)
-        return self._trigger(True, summary(belief))
+        went = (
+            ""
+            if how is None
+            else f"; {how['drives']} drives, {how['distance_m']:.2f} m, ended: {how['ended']}"
+        )
+        return self._trigger(True, summary(belief) + went)
 
     def _reinitialize(self, _request: Any) -> Any:
         self.publish(self.localizer.reset())  # a failure is a Zenoh error reply (Empty says none)
