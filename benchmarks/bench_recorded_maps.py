@@ -40,7 +40,7 @@ from typing import Any
 
 from localizer.lookalikes import pairs_without_counterparts
 from robot.worlds import make_world
-from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, run_kidnappings
+from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, describe_endings, run_kidnappings
 from toploc.evaluation.localization import OUTCOMES, count_outcomes
 from toploc.evaluation.recorded_maps import record_counterparts, record_map
 from toploc.maps import cache_dir, calibrate_map, load_map
@@ -159,7 +159,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
     names = " ".join(f"{SHORT[o]:>4s}" for o in OUTCOMES)
     print(
         f"| world | K | first look {names} | final {names} | drove | drives | m | s "
-        "| >=0.9 right | Brier |"
+        "| >=0.9 right | Brier | ended |"
     )
     for row in rows:
         t = row["totals"]
@@ -169,7 +169,8 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"| {row['world']} | {row['places_per_room']}{'+2' if row['advised'] else ''} "
             f"| {first} | {final} | "
             f"{t['drove']}/{t['trials']} | {t['mean_steps']:.2f} | {t['mean_distance_m']:.2f} | "
-            f"{t['mean_seconds']:.1f} | {confident(t)} | {t['reliability']['brier']:.3f} |"
+            f"{t['mean_seconds']:.1f} | {confident(t)} | {t['reliability']['brier']:.3f} "
+            f"| {describe_endings(t['endings'])} |"
         )
 
 

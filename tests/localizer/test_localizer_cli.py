@@ -157,6 +157,8 @@ def test_sim_kidnap_reports_each_trial_and_the_totals(building_map, tmp_path):
     assert {"final_belief", "steps", "distance_m", "frames", "success"} <= set(trial)
     assert report["totals"]["trials"] == 1
     assert report["totals"]["success_rate"] == float(trial["success"])
+    assert report["totals"]["endings"] == {trial["ended"]: 1}
+    assert f"ended: {trial['ended']} 1" in result.output
 
 
 def test_map_calibrate_stores_the_likelihood_that_map_info_shows(building_map, tmp_path):

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from robot.conditions import CONDITIONS
 from toploc.commands.options import db_option, policy_option
-from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, run_kidnappings
+from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, describe_endings, run_kidnappings
 
 
 def _print_trial(trial: Trial) -> None:
@@ -105,6 +105,7 @@ def kidnap(
         f"mean distance {summary['mean_distance_m']:.2f} m, "
         f"mean frames {summary['mean_frames']:.1f}, {summary['mean_seconds']:.1f} s per trial"
     )
+    click.echo(f"ended: {describe_endings(summary['endings'])}")
     if json_path is not None:
         json_path.write_text(json.dumps(run.to_json(), indent=2) + "\n")
         click.echo(f"wrote {json_path}")

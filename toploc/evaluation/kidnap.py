@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -91,6 +92,7 @@ class Trial:
             "distance_m": self.result.distance_m,
             "frames": self.result.frames,
             "looks_elsewhere": self.result.looks_elsewhere,
+            "ended": self.result.ended,
             "success": self.success,
             "outcome": self.outcome,
             "seconds": self.seconds,
@@ -98,8 +100,9 @@ class Trial:
 
 
 def totals(trials: list[Trial]) -> dict[str, Any]:
-    """Success rate, the five outcomes, first-look accuracy, means over the trials, and the
-    reliability of the final answers' stated probabilities."""
+    """Success rate, the five outcomes, first-look accuracy, means over the trials, why the
+    localizations ended (``endings``: count per :data:`localizer.active.ENDINGS` key met), and
+    the reliability of the final answers' stated probabilities."""
     n = len(trials)
     finals = [t.result.final for t in trials]
     stated = [final.top[1] for final in finals]
@@ -118,8 +121,14 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
         "mean_frames": statistics.fmean(t.result.frames for t in trials),
         "mean_seconds": statistics.fmean(t.seconds for t in trials),
         "drove": sum(bool(t.result.visits) for t in trials),
+        "endings": dict(sorted(Counter(t.result.ended for t in trials).items())),
         "reliability": reliability(stated, right).to_json(),
     }
+
+
+def describe_endings(endings: dict[str, int]) -> str:
+    """``settled 12, no-telling-place 8``: :func:`totals`' ``endings`` in one phrase."""
+    return ", ".join(f"{ending} {n}" for ending, n in endings.items()) or "none"
 
 
 @dataclass(frozen=True)
