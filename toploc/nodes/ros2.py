@@ -60,6 +60,7 @@ from toploc.bus.ros2.messages import (
     room_belief,
     summary,
 )
+from toploc.runner import describe_active
 
 NODE_NAME = "toploc"
 LOCALIZER_NODE = "localizer"
@@ -236,11 +237,7 @@ class Ros2Bridge:
         how = reply.get("active")  # how an active localization went: the reply's, not a topic's
         belief = {k: v for k, v in reply.items() if k != "active"}
         self.publish(belief)
-        went = (
-            ""
-            if how is None
-            else f"; {how['drives']} drives, {how['distance_m']:.2f} m, ended: {how['ended']}"
-        )
+        went = "" if how is None else f"; {describe_active(how)}"
         return self._trigger(True, summary(belief) + went)
 
     def _reinitialize(self, _request: Any) -> Any:
