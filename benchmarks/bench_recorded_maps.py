@@ -26,7 +26,7 @@ seed 12). World seeds 12 and up have not been looked at: the next change must be
 them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
-        [--trials 20] [--record-seed 0] [--world-seed 0] [--declared] [--advised
+        [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
         [--advised-offset M]] [--json out.json]
 """
 
@@ -78,12 +78,16 @@ def recorded_db(
     advised: bool,
     declared: bool = False,
     advised_offset_m: float = 0.0,
+    drive: bool = False,
 ) -> Path:
     """The cached recorded map (recorded if missing), calibrated again by the code being
-    measured; ``declared``: then the world's twins (:data:`TWINS`) declared as ``toploc map
+    measured; ``drive``: recorded on one drive through the doors, the legs stored
+    (:func:`~toploc.evaluation.recorded_maps.record_drive`), else room by room;
+    ``declared``: then the world's twins (:data:`TWINS`) declared as ``toploc map
     lookalike`` does; ``advised``: then two places at the same two spots of each look-alike
     pair's rooms, as ``toploc map info`` advises."""
-    suffix = ("-declared" if declared else "") + ("-advised" if advised else "")
+    suffix = ("-drive" if drive else "") + ("-declared" if declared else "")
+    suffix += "-advised" if advised else ""
     suffix += f"-off{advised_offset_m:g}" if advised and advised_offset_m else ""
     name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{suffix}"
     db = cache / name / "map.db"
@@ -91,7 +95,7 @@ def recorded_db(
     if not db.exists():
         db.parent.mkdir(parents=True, exist_ok=True)
         scene = make_world(world, world_seed)
-        record_map(scene, places, record_seed, db, progress=True)
+        record_map(scene, places, record_seed, db, progress=True, drive=drive)
         for pair in TWINS[world] if declared else ():
             calibrate_map(db, declare=pair)
         if advised:
@@ -120,6 +124,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         args.advised,
         args.declared,
         args.advised_offset,
+        args.drive,
     )
 
     def show(trial: Trial) -> None:
@@ -159,7 +164,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
     names = " ".join(f"{SHORT[o]:>4s}" for o in OUTCOMES)
     print(
         f"| world | K | first look {names} | final {names} | drove | drives | m | s "
-        "| >=0.9 right | Brier | ended |"
+        "| >=0.9 right | Brier | ended | route checks own +/-, other +/- | elsewhere |"
     )
     for row in rows:
         t = row["totals"]
@@ -170,8 +175,15 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"| {first} | {final} | "
             f"{t['drove']}/{t['trials']} | {t['mean_steps']:.2f} | {t['mean_distance_m']:.2f} | "
             f"{t['mean_seconds']:.1f} | {confident(t)} | {t['reliability']['brier']:.3f} "
-            f"| {describe_endings(t['endings'])} |"
+            f"| {describe_endings(t['endings'])} | {_checks(t['route_checks'])} "
+            f"| {t['ended_elsewhere']} |"
         )
+
+
+def _checks(counts: dict[str, int]) -> str:
+    """``12/1, 0/9``: own room's checks confirmed/refuted, then the other rooms'."""
+    own = f"{counts['own_confirmed']}/{counts['own_refuted']}"
+    return f"{own}, {counts['other_confirmed']}/{counts['other_refuted']}"
 
 
 def main() -> None:
@@ -201,6 +213,11 @@ def main() -> None:
         action="store_true",
         help="after recording, the world's twins declared (toploc map lookalike)",
     )
+    parser.add_argument(
+        "--drive",
+        action="store_true",
+        help="record each map on one drive through the doors (legs stored), not room by room",
+    )
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args()
     worlds = args.worlds.split(",")
@@ -219,6 +236,7 @@ def main() -> None:
     print(
         f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "
         f"{args.trials} kidnappings each, policy {args.policy}"
+        f"{', on one drive' if args.drive else ''}"
         f"{', twins declared' if args.declared else ''}"
         f"{', advised (2 counterpart places per look-alike pair)' if args.advised else ''}"
     )

@@ -5,6 +5,13 @@ Works with any :class:`localizer.robot_protocol.Robot`; the policy that picks wh
 pluggable (:mod:`localizer.policy`), and so is how the robot gets to a place (``home``: by
 default :func:`~localizer.visual_homing.drive_home`; the service passes its homing node's, so
 that a drive publishes progress and can be cancelled).
+
+When the policy has no place left that tells the likely rooms apart (look-alike rooms that
+look alike from every place of theirs), the robot checks a room by a recorded route
+(:mod:`localizer.routes`): it homes to a place of the most likely room, drives the route the
+map recorded from there into another room, homes to the route's end place and drives back. If
+it started in that room, it is at the end place when the route ends and homes there at once;
+if it started in a look-alike, the same drive ends elsewhere (:class:`RouteCheck`).
 """
 
 from __future__ import annotations
@@ -15,14 +22,24 @@ from dataclasses import dataclass, field, replace
 
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
-from localizer.localizer import Localizer
+from localizer.localizer import Localizer, Observation
 from localizer.policy import Policy, PolicyContext, make_policy
-from localizer.robot_protocol import Robot
-from localizer.visual_homing import HomingParams, HomingResult, drive_home
-from mapdb.records import Place
+from localizer.robot_protocol import Pose2D, Robot
+from localizer.routes import ODOMETRY, DriveFrame, Route, drive_route, retrace_route, route_out
+from localizer.visual_homing import (
+    HomingError,
+    HomingParams,
+    HomingResult,
+    drive_home,
+    matched_inliers,
+)
+from mapdb.records import Fingerprint, Place
 
 # A short homing move rarely leaves the room: keep most of the mass where it is.
 HOMING_STAY_PROBABILITY = 0.98
+LIKELY_SHARE = 0.1
+"""A room at least this share of the top room's probability is checked by a route too (a
+refuted look-alike tells as much as a confirmed top room)."""
 CANCELLED = "cancelled"
 """The :attr:`HomingResult.reason` of a drive someone cancelled: no further drive follows."""
 
@@ -46,7 +63,14 @@ class ActiveParams:
     ``min_new_view_m``: a drive shorter than this (odometric) ends where the robot already
     looked, and its frame is not folded into the belief again: the same view twice is one
     piece of evidence, not two (homing to a counterpart at the spot the robot stands on
-    drives nowhere, and its frame repeated the last one's counts to the inlier)."""
+    drives nowhere, and its frame repeated the last one's counts to the inlier).
+
+    Route checks (:class:`RouteCheck`): routes up to ``route_max_m`` long; the robot
+    "arrived at once" when homing to the route's end place arrives after at most
+    ``route_slack_m`` plus ``route_slack_share`` of the route's length (the odometry's drift
+    over the route). ``route_hit_rate``: how often that happens when the robot did start in
+    the route's room; ``route_false_rate``: when it started elsewhere. Their ratio is the
+    likelihood ratio one check gives."""
 
     max_targets: int = 4
     homing: HomingParams = field(default_factory=HomingParams)
@@ -54,8 +78,18 @@ class ActiveParams:
     lost_turn_deg: float = 120.0
     lost_step_m: float = 0.5
     min_new_view_m: float = 0.1
+    route_max_m: float = 15.0
+    route_hit_rate: float = 0.9
+    route_false_rate: float = 0.1
+    route_slack_m: float = 1.0
+    route_slack_share: float = 0.3
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.route_false_rate < self.route_hit_rate < 1.0:
+            raise ValueError(
+                "need 0 < route_false_rate < route_hit_rate < 1, got "
+                f"{self.route_false_rate} and {self.route_hit_rate}"
+            )
         if self.max_targets < 0 or self.lost_looks < 0:
             raise ValueError(
                 f"max_targets and lost_looks must be >= 0, got {self.max_targets}, "
@@ -78,12 +112,27 @@ class Visit:
 
 
 @dataclass(frozen=True)
+class RouteCheck:
+    """One room checked by a recorded route: the robot homed to place ``start`` of ``room``,
+    drove the route to place ``end`` (of another room), homed to it, and drove back;
+    ``confirmed``: the homing to ``end`` arrived at once (the robot was where the route ends
+    if it started in ``room``); ``distance_m``: odometric metres of the whole check."""
+
+    room: str
+    start: int
+    end: int
+    confirmed: bool
+    distance_m: float
+
+
+@dataclass(frozen=True)
 class ActiveResult:
     """How an active localization went: the first and final beliefs, every visit, the
     frames used (captures that went into the belief or into homing), the distance driven
-    (odometric, metres), how many times the robot, lost, stepped away to look again, and why
+    (odometric, metres), how many times the robot, lost, stepped away to look again, why
     it ended (a key of :data:`ENDINGS`: an ambiguous belief with ``"no-telling-place"`` is
-    look-alike rooms that the map has no place to tell apart)."""
+    look-alike rooms that the map has no place nor route to tell apart) and the rooms checked
+    by a recorded route (each also a visit, to the route's end place)."""
 
     first: RoomBelief
     final: RoomBelief
@@ -92,6 +141,7 @@ class ActiveResult:
     distance_m: float
     looks_elsewhere: int = 0
     ended: str = "settled"
+    checks: tuple[RouteCheck, ...] = ()
 
 
 def active_step(
@@ -153,6 +203,8 @@ def localize_actively(
         counterparts=localizer.counterparts,
     )
     looks_elsewhere = 0
+    tried_routes: set[int] = set()
+    checks: list[RouteCheck] = []
     while True:
         if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
             looks_elsewhere += 1
@@ -173,6 +225,27 @@ def localize_actively(
             params.max_targets,
             len(visits),
         )
+        check = None
+        if target is None and _may_drive(belief, len(visits), params.max_targets):
+            check = _route_to_check(localizer, belief, observation, tried_routes, params)
+        if check is not None:
+            start, route = check
+            tried_routes.add(start.id)
+            notify(localizer.belief(LocalizationState.HOMING))
+            done, captured, homing, observation = _check_route(
+                localizer, robot, go, start, route, params
+            )
+            distance += done.distance_m
+            frames += captured
+            belief = localizer.belief()
+            notify(belief)
+            checks.append(done)
+            end_room = localizer.map.place(route.end).room
+            visits.append(Visit(route.end, end_room, homing, belief))
+            if homing.reason == CANCELLED:
+                ended = CANCELLED
+                break
+            continue
         if target is None:
             ended = _ending(belief, len(visits), params.max_targets)
             break
@@ -195,7 +268,129 @@ def localize_actively(
         if homing.reason == CANCELLED:
             ended = CANCELLED
             break
-    return ActiveResult(first, belief, tuple(visits), frames, distance, looks_elsewhere, ended)
+    return ActiveResult(
+        first, belief, tuple(visits), frames, distance, looks_elsewhere, ended, tuple(checks)
+    )
+
+
+def _may_drive(belief: RoomBelief, drives: int, max_targets: int) -> bool:
+    return belief.state is LocalizationState.AMBIGUOUS and drives < max_targets
+
+
+def _route_to_check(
+    localizer: Localizer,
+    belief: RoomBelief,
+    observation: Observation,
+    tried: set[int],
+    params: ActiveParams,
+) -> tuple[Place, Route] | None:
+    """A place to check a likely room from, and its recorded route out of the room and its
+    look-alikes (else out of the room alone). The likely rooms (at least a tenth of the top
+    one's probability) are taken from the most likely on; in each, the places with a route
+    and a heading, not tried yet, from the one the latest frame matched best. None if there
+    is none."""
+    counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
+    graph, places = localizer.map.legs, localizer.map.places
+    top_p = belief.top[1]
+    for room, p in belief.ranked():
+        if p < LIKELY_SHARE * top_p:
+            break
+        starts = [
+            place
+            for place in places
+            if place.room == room
+            and place.id in graph
+            and place.heading_deg is not None
+            and place.id not in tried
+        ]
+        for place in sorted(starts, key=lambda q: (-counts.get(q.id, 0.0), q.id)):
+            for leave in ({room, *localizer.lookalikes.get(room, ())}, {room}):
+                route = route_out(graph, places, place.id, leave, params.route_max_m)
+                if route is not None:
+                    return place, route
+    return None
+
+
+def _frame_at(
+    localizer: Localizer, robot: Robot, place: Place, homed: HomingResult, params: ActiveParams
+) -> DriveFrame | None:
+    """The drive frame of ``place``'s leg for a robot that has just homed to it: the robot at
+    the place's position, its heading the place's turned by the rotation between the last
+    view and the place's (None if they do not match, or the place has no pose)."""
+    if place.x_m is None or place.y_m is None or place.heading_deg is None:
+        return None
+    try:
+        goal = localizer.map.fingerprint(place.id)
+        _, shift_rad = matched_inliers(homed.last, goal, params.homing.step)
+    except HomingError:
+        return None
+    heading_rad = math.radians(place.heading_deg) - shift_rad
+    return DriveFrame(Pose2D(place.x_m, place.y_m, heading_rad), robot.odometry())
+
+
+def _frame_by_view(
+    robot: Robot, view: Fingerprint, odometry: Pose2D, homed: HomingResult, params: ActiveParams
+) -> DriveFrame:
+    """The odometry frame of a drive, fixed again for a robot that has homed back to a
+    ``view`` it took at ``odometry``: there, turned by the rotation between the views (its
+    odometry as it is, if they do not match)."""
+    try:
+        _, shift_rad = matched_inliers(homed.last, view, params.homing.step)
+    except HomingError:
+        return ODOMETRY
+    at = Pose2D(odometry.x_m, odometry.y_m, odometry.heading_rad - shift_rad)
+    return DriveFrame(at, robot.odometry())
+
+
+def _check_route(
+    localizer: Localizer,
+    robot: Robot,
+    home: Callable[[int], HomingResult],
+    start: Place,
+    route: Route,
+    params: ActiveParams,
+) -> tuple[RouteCheck, int, HomingResult, Observation]:
+    """Check ``start``'s room by ``route`` (see :class:`RouteCheck`), fold the result into the
+    localizer's belief, and look again once back at ``start``. Returns the check, the frames
+    captured, the homing to the route's end place and the last observation."""
+    assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
+    distance, frames = 0.0, 0
+    to_start = home(start.id)
+    distance += to_start.distance_m
+    frames += len(to_start.lengths)
+    confirmed, at_end = False, to_start
+    frame = _frame_at(localizer, robot, start, to_start, params)
+    if frame is not None and to_start.reason != CANCELLED:
+        out = drive_route(robot, route, frame)
+        distance += out.distance_m
+        end_view, end_odometry = localizer.extract(robot.capture().image), robot.odometry()
+        frames += 1
+        at_end = home(route.end)
+        distance += at_end.distance_m
+        frames += len(at_end.lengths)
+        slack_m = params.route_slack_m + params.route_slack_share * route.length_m
+        confirmed = at_end.arrived and at_end.distance_m <= slack_m
+        if at_end.reason != CANCELLED:
+            # back to where the route ended (by its view), then its moves undone: this brings
+            # the robot back to the start in whichever room it was, with the drift removed
+            to_end_view = drive_home(robot, end_view, localizer.extract, params.homing)
+            distance += to_end_view.distance_m
+            frames += len(to_end_view.lengths)
+            again = _frame_by_view(robot, end_view, end_odometry, to_end_view, params)
+            distance += retrace_route(robot, out, again).distance_m
+            back = home(start.id)
+            distance += back.distance_m
+            frames += len(back.lengths)
+            if back.arrived:  # back where the check began: it tells about this room
+                hit, false = params.route_hit_rate, params.route_false_rate
+                ratio = hit / false if confirmed else (1.0 - hit) / (1.0 - false)
+                localizer.update_rooms({start.room: ratio})
+    localizer.predict(HOMING_STAY_PROBABILITY)
+    observation = localizer.observe(robot.capture().image)
+    localizer.update(observation)
+    frames += 1
+    check = RouteCheck(start.room, start.id, route.end, confirmed, distance)
+    return check, frames, at_end, observation
 
 
 def _ending(belief: RoomBelief, drives: int, max_targets: int) -> str:

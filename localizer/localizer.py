@@ -17,6 +17,7 @@ from functools import cached_property
 from pathlib import Path
 
 import cv2
+import networkx as nx
 import numpy as np
 
 from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateThresholds
@@ -32,6 +33,7 @@ from localizer.lookalikes import (
 )
 from localizer.policy import PlaceSimilarity
 from localizer.retrieval import PlaceIndex, Shortlister
+from localizer.routes import leg_graph
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place, PlaceStore
 
 # From this many places (twice the default shortlist) the index pays: verifying all 30 places of
@@ -128,6 +130,12 @@ class LoadedMap:
     def places_per_room(self) -> Counter[str]:
         """How many places of each room the table holds (a room without any: 0)."""
         return Counter(self.table.rooms)
+
+    @cached_property
+    def legs(self) -> nx.Graph:
+        """The places joined by the legs they were recorded on (see
+        :func:`localizer.routes.leg_graph`)."""
+        return leg_graph(self.places)
 
     @cached_property
     def _index_of(self) -> dict[int, int]:
@@ -309,6 +317,20 @@ class Localizer:
         likelihood = self.frame_likelihood(observation)
         self.filter.update(likelihood)
         self.latest = observation
+        return self.belief()
+
+    def update_rooms(self, likelihood: Mapping[str, float]) -> RoomBelief:
+        """Fold a likelihood given per room (a room not named: 1) into the belief, as a check
+        that is no frame does (a recorded route driven, :mod:`localizer.active`); the latest
+        observation stays. ``ValueError`` for an unknown room or a likelihood that is not a
+        finite number >= 0."""
+        unknown = set(likelihood) - set(self.map.rooms)
+        if unknown:
+            raise ValueError(f"no room {sorted(unknown)} in the map {self.map.path}")
+        values = np.array([likelihood.get(room, 1.0) for room in self.map.rooms], dtype=float)
+        if not (np.all(np.isfinite(values)) and np.all(values >= 0)):
+            raise ValueError(f"a room likelihood must be a finite number >= 0, got {likelihood}")
+        self.filter.update(values)
         return self.belief()
 
     def predict(self, stay_probability: float | None = None) -> None:

@@ -1,4 +1,5 @@
-"""Pure conversion between a :class:`Fingerprint` and the columns of a ``fingerprints`` row.
+"""Pure conversion between a :class:`Fingerprint` and the columns of a ``fingerprints`` row,
+and between a :class:`Leg` and a ``legs`` row.
 
 Arrays are stored as raw little-endian blobs, so reading them back is one ``np.frombuffer`` each
 (no parsing): keypoints ``(n, 2)`` float32, bearings ``(n,)`` float64, descriptors ``(n, d)``.
@@ -18,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from homing.alv import alv_from_bearings
-from mapdb.records import Fingerprint, ParamValue
+from mapdb.records import Fingerprint, Leg, ParamValue
 
 KEYPOINTS_DTYPE = np.dtype("<f4")
 BEARINGS_DTYPE = np.dtype("<f8")
@@ -129,3 +130,20 @@ def fingerprint_from_row(
         ),
         params=params,
     )
+
+
+def via_to_json(leg: Leg) -> str:
+    """A leg's via points as the ``legs.via_json`` text: ``[[x_m, y_m], ...]``."""
+    return json.dumps([list(point) for point in leg.via_xy_m], separators=(",", ":"))
+
+
+def leg_from_row(from_place_id: int, via_json: str) -> Leg:
+    """The :class:`Leg` a ``legs`` row stores; ``ValueError`` saying what is wrong if its
+    ``via_json`` is not a list of ``[x_m, y_m]`` pairs of finite numbers."""
+    try:
+        points = json.loads(via_json)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"via_json is not JSON ({error})") from None
+    if not isinstance(points, list) or not all(isinstance(p, list) for p in points):
+        raise ValueError(f"via_json must be a list of [x_m, y_m] pairs, got {via_json[:60]!r}")
+    return Leg(from_place_id, tuple(tuple(point) for point in points))

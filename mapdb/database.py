@@ -13,6 +13,7 @@ import json
 import sqlite3
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
@@ -20,7 +21,7 @@ from urllib.parse import quote
 
 import sqlite_utils
 
-from mapdb.codec import fingerprint_to_row
+from mapdb.codec import fingerprint_to_row, leg_from_row, via_to_json
 from mapdb.errors import (
     SQLITE_CANTOPEN,
     SQLITE_READONLY,
@@ -35,7 +36,7 @@ from mapdb.errors import (
     UnknownRoomError,
     translate_sqlite_error,
 )
-from mapdb.records import Fingerprint, MapInfo, NewPlace, Place, RoomSummary, check_name
+from mapdb.records import Fingerprint, Leg, MapInfo, NewPlace, Place, RoomSummary, check_name
 from mapdb.schema import (
     CHANGES_TABLE,
     MAP_ID_KEY,
@@ -51,9 +52,20 @@ from mapdb.schema import (
 
 _SELECT_PLACES = (
     "SELECT p.id, r.name, p.x_m, p.y_m, p.heading_deg, p.image_sha256, p.image_width_px, "
-    "p.image_height_px, p.captured_utc, p.source, p.added_utc, p.camera "
-    "FROM places p JOIN rooms r ON r.id = p.room_id"
+    "p.image_height_px, p.captured_utc, p.source, p.added_utc, p.camera, l.from_place_id, "
+    "l.via_json FROM places p JOIN rooms r ON r.id = p.room_id "
+    "LEFT JOIN legs l ON l.place_id = p.id"
 )
+
+
+def _place_from_row(row: Sequence[Any]) -> Place:
+    """A :class:`Place` from a row of ``_SELECT_PLACES``."""
+    *columns, from_place_id, via_json = row
+    place = Place(*columns)
+    if from_place_id is None:
+        return place
+    return replace(place, leg=leg_from_row(from_place_id, via_json))
+
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -447,6 +459,8 @@ class MapDatabase:
             existing = self._place_id_for_image(place.image_sha256)
             if existing is not None:
                 raise DuplicatePlaceError(place.image_sha256, existing, self.path)
+            if place.leg is not None:
+                self._check_leg_start(place.leg)
             place_row = {
                 "room_id": self._ensure_room(place.room),
                 "x_m": place.x_m,
@@ -464,8 +478,29 @@ class MapDatabase:
             self.db.table("fingerprints").insert_all(
                 [{**row, "place_id": place_id} for row in rows]
             )
+            if place.leg is not None:
+                self.db.execute(
+                    "INSERT INTO legs (place_id, from_place_id, via_json) VALUES (?, ?, ?)",
+                    [place_id, place.leg.from_place, via_to_json(place.leg)],
+                )
             self._log_change("place", {"place_id": place_id})
         return place_id
+
+    def _check_leg_start(self, leg: Leg) -> None:
+        """``UnknownPlaceError`` if the place ``leg`` comes from does not exist, ``ValueError``
+        if it has no position (a leg joins two odometry positions)."""
+        row = self.db.execute(
+            "SELECT x_m, y_m FROM places WHERE id = ?", [leg.from_place]
+        ).fetchone()
+        if row is None:
+            raise UnknownPlaceError(
+                f"the leg starts at place {leg.from_place}, which {self.path} does not have",
+                self.path,
+            )
+        if row[0] is None or row[1] is None:
+            raise ValueError(
+                f"the leg starts at place {leg.from_place}, which has no position to drive from"
+            )
 
     def _place_id_for_image(self, image_sha256: str) -> int | None:
         row = self.db.execute(
@@ -482,7 +517,7 @@ class MapDatabase:
             sql += " WHERE p.room_id = ?"
             params.append(self.room_id(room))
         rows = self.db.execute(sql + " ORDER BY p.id", params).fetchall()
-        return [Place(*row) for row in rows]
+        return [_place_from_row(row) for row in rows]
 
     @_translated
     def place(self, place_id: int) -> Place:
@@ -490,7 +525,7 @@ class MapDatabase:
         row = self.db.execute(_SELECT_PLACES + " WHERE p.id = ?", [place_id]).fetchone()
         if row is None:
             raise UnknownPlaceError(f"unknown place {place_id} in {self.path}", self.path)
-        return Place(*row)
+        return _place_from_row(row)
 
     @_translated
     def fingerprint_counts(self) -> dict[str, int]:

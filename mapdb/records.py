@@ -2,7 +2,9 @@
 the fingerprints of panoramas (pure: numpy only, no SQLite), shared by every layer above.
 
 Positions are in metres and headings in degrees, in the metric frame of the place's own room
-(REP-103: x forward, y left, CCW positive); ``None`` means unknown. Times are ISO-8601 UTC text.
+(REP-103: x forward, y left, CCW positive); ``None`` means unknown. A place recorded on a drive
+(its :class:`Leg`) shares one odometry frame with the place the drive came from. Times are
+ISO-8601 UTC text.
 """
 
 from __future__ import annotations
@@ -53,6 +55,40 @@ def check_finite(value: float | None, what: str) -> None:
         raise ValueError(f"{what} must be a finite number or unknown, got {value!r}")
 
 
+MAX_VIA_POINTS = 10_000
+"""The most odometry positions a :class:`Leg` holds (a drive of kilometres at 0.1 m)."""
+
+
+@dataclass(frozen=True)
+class Leg:
+    """How the robot came to a place on one drive: from place ``from_place``, through the
+    odometry positions ``via_xy_m`` (metres, in order, the ends excluded). The place's pose,
+    ``from_place``'s pose and ``via_xy_m`` are in one frame, the odometry's on that drive
+    (``toploc map record`` stores them; the active localizer drives a recorded route back).
+
+    Raises ``ValueError`` for a place id below 1, a via point that is not two finite numbers,
+    or more than :data:`MAX_VIA_POINTS` of them."""
+
+    from_place: int
+    via_xy_m: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.from_place, bool) or not isinstance(self.from_place, int):
+            raise ValueError(f"leg from_place must be a place id, got {self.from_place!r}")
+        if self.from_place < 1:
+            raise ValueError(f"leg from_place must be a place id >= 1, got {self.from_place}")
+        if len(self.via_xy_m) > MAX_VIA_POINTS:
+            raise ValueError(f"leg has {len(self.via_xy_m)} via points, more than {MAX_VIA_POINTS}")
+        points = []
+        for i, point in enumerate(self.via_xy_m):
+            if len(point) != 2 or not all(
+                isinstance(v, int | float) and math.isfinite(v) for v in point
+            ):
+                raise ValueError(f"leg via point {i} must be two finite numbers, got {point!r}")
+            points.append((float(point[0]), float(point[1])))
+        object.__setattr__(self, "via_xy_m", tuple(points))
+
+
 @dataclass(frozen=True)
 class NewPlace:
     """A panorama about to be added: where it was taken and where its image came from.
@@ -68,6 +104,7 @@ class NewPlace:
     y_m: float | None = None
     heading_deg: float | None = None
     captured_utc: str | None = None
+    leg: Leg | None = None
 
     def __post_init__(self) -> None:
         check_name(self.room)
@@ -76,13 +113,16 @@ class NewPlace:
         check_finite(self.heading_deg, "heading_deg")
         if len(self.image_sha256) != 64:
             raise ValueError(f"image_sha256 must be 64 hex digits, got {self.image_sha256!r}")
+        if self.leg is not None and (self.x_m is None or self.y_m is None):
+            raise ValueError("a place with a leg needs its odometry position (x_m and y_m)")
 
 
 @dataclass(frozen=True)
 class Place:
     """A stored place (one panorama) of the map: its id, room and pose in the room's frame
-    (``None`` where unknown), and the panorama's bookkeeping (empty where not read from a map
-    database, e.g. in a test or a simulation)."""
+    (``None`` where unknown), the panorama's bookkeeping (empty where not read from a map
+    database, e.g. in a test or a simulation) and the drive it was recorded on (``leg``; then
+    the pose is in that drive's odometry frame)."""
 
     id: int
     room: str
@@ -96,6 +136,7 @@ class Place:
     source: str = ""
     added_utc: str = ""
     camera: str = "cylinder"
+    leg: Leg | None = None
 
     @property
     def xy_m(self) -> tuple[float, float] | None:

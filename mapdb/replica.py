@@ -123,8 +123,14 @@ def _rows_of(map_db: MapDatabase, kind: str, ref: dict[str, int | str]) -> MapRo
         fingerprints = execute(
             _select("fingerprints", "WHERE place_id = ? ORDER BY id"), [place_id]
         )
+        legs = execute(_select("legs", "WHERE place_id = ?"), [place_id])
         room_ids = [row[1] for row in places]
-        return MapRows(rooms=rooms(*room_ids), places=places, fingerprints=tuple(fingerprints))
+        return MapRows(
+            rooms=rooms(*room_ids),
+            places=places,
+            fingerprints=tuple(fingerprints),
+            legs=tuple(legs),
+        )
     if kind == "room":
         return MapRows(rooms=rooms(ref["room_id"]))
     if kind == "edge":
@@ -197,7 +203,7 @@ def _insert(db: sqlite_utils.Database, rows: MapRows, where: str) -> None:
                 f"{where}: room {row[0]} is {row[1]!r} in the map but "
                 f"{None if held is None else held[0]!r} here"
             )
-    for table in ("places", "fingerprints", "edges"):
+    for table in ("places", "fingerprints", "legs", "edges"):
         names = [name for name, _ in COLUMNS[table]]
         verb = "INSERT OR IGNORE" if table == "edges" else "INSERT"
         sql = f"{verb} INTO {table} ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})"

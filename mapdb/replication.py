@@ -2,11 +2,11 @@
 
 A replica is a map file of its own that holds the same rows as the map it copies, under the
 same ids (a place is the same place on every robot). What crosses the bus is :class:`MapRows`:
-rows of ``rooms``, ``edges``, ``places`` and ``fingerprints`` in the columns of
+rows of ``rooms``, ``edges``, ``places``, ``fingerprints`` and ``legs`` in the columns of
 :mod:`mapdb.schema`, and the stored likelihoods. A :class:`Snapshot` is the whole map at one
-version; a :class:`MapChange` the rows one write added (a place brings its room and its
-fingerprints; an edge its two rooms), so applying a change is inserting rows that may already
-be there.
+version; a :class:`MapChange` the rows one write added (a place brings its room, its
+fingerprints and its leg; an edge its two rooms), so applying a change is inserting rows that
+may already be there.
 
 The encoding (:func:`encode_snapshot`, :func:`encode_changes`): ``MAGIC``, the header's length
 (4 bytes, big-endian), the header as UTF-8 JSON, then the blobs (keypoints, bearings,
@@ -26,6 +26,8 @@ import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+from mapdb.codec import leg_from_row
 
 MAGIC = b"toploc-map-rows\x001"
 CHUNK_BYTES = 4 << 20
@@ -47,6 +49,7 @@ COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
         ("descriptor_dtype", _STR), ("descriptors", _BLOB), ("alv_x", _FLOAT), ("alv_y", _FLOAT),
         ("params_json", _STR),
     ),
+    "legs": (("place_id", _INT), ("from_place_id", _INT), ("via_json", _STR)),
 }  # fmt: skip
 """Each table's columns in order, with their kind (``?``: may be NULL)."""
 TABLES = tuple(COLUMNS)
@@ -70,6 +73,7 @@ class MapRows:
     edges: tuple[Row, ...] = ()
     places: tuple[Row, ...] = ()
     fingerprints: tuple[Row, ...] = ()
+    legs: tuple[Row, ...] = ()
     likelihoods: tuple[tuple[str, str], ...] = ()
 
     def table(self, name: str) -> tuple[Row, ...]:
@@ -265,6 +269,11 @@ def _rows_from_json(tables: Any, tail: memoryview, where: str) -> MapRows:
             )
             if name == "fingerprints":
                 check_fingerprint_row(cells, at)
+            if name == "legs":
+                try:
+                    leg_from_row(cells[1], cells[2])
+                except ValueError as error:
+                    raise BadMapDataError(f"{at}: {error}") from None
             out.append(cells)
         decoded[name] = tuple(out)
     likelihoods = tables.get("likelihoods", [])

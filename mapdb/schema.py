@@ -27,6 +27,10 @@ Tables (all STRICT; positions in metres and headings in degrees in the frame of 
   (:mod:`mapdb.replica`). ``meta`` holds ``map_version`` (the last version; 0: the map as it was
   before version 3, or empty) and ``map_id`` (the map's own id, a random one when it was
   migrated: what replicas of it check; :meth:`mapdb.database.MapDatabase.map_id`).
+- ``legs(place_id PK -> places, from_place_id -> places, via_json)`` (version 4): the drive a
+  place was recorded on (:class:`mapdb.records.Leg`): the place recorded before it on that
+  drive and the odometry positions between them (JSON ``[[x_m, y_m], ...]``); both places'
+  poses are then in that drive's odometry frame. Written with its place, in its change.
 """
 
 from __future__ import annotations
@@ -155,7 +159,20 @@ def _v3_versions(db: sqlite_utils.Database) -> None:
     )
 
 
-MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera, _v3_versions)
+def _v4_legs(db: sqlite_utils.Database) -> None:
+    """Version 4: the drive each place was recorded on, where known (places before: none)."""
+    db.create_table(
+        "legs",
+        {"place_id": int, "from_place_id": int, "via_json": str},
+        pk="place_id",
+        foreign_keys=[("place_id", "places", "id"), ("from_place_id", "places", "id")],
+        not_null={"place_id", "from_place_id", "via_json"},
+        strict=True,
+    )
+    db.table("legs").create_index(["from_place_id"])
+
+
+MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera, _v3_versions, _v4_legs)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 READ_ONLY_VIEWS: dict[Migration, str] = {
@@ -163,6 +180,9 @@ READ_ONLY_VIEWS: dict[Migration, str] = {
     _v3_versions: (
         f"CREATE TEMP VIEW {CHANGES_TABLE} AS SELECT 0 AS version, '' AS kind, '' AS ref_json, "
         "'' AS created_utc WHERE 0"
+    ),
+    _v4_legs: (
+        "CREATE TEMP VIEW legs AS SELECT 0 AS place_id, 0 AS from_place_id, '' AS via_json WHERE 0"
     ),
 }
 """For a migration, the SQL that shows its result to a read-only connection without writing:

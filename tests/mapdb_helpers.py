@@ -53,7 +53,7 @@ def table_counts(path: Path) -> dict[str, int]:
     with sqlite3.connect(path) as conn:
         return {
             table: conn.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
-            for table in ("rooms", "edges", "places", "fingerprints")
+            for table in ("rooms", "edges", "places", "fingerprints", "legs")
         }
 
 

@@ -28,7 +28,8 @@ def test_build_imports_every_image_with_its_pose(
     entries = read_manifest(make_dataset(7))
     report = build_map(map_db, entries, EXTRACT, workers=workers, progress=False)
     assert report.ok and report.count(Status.ADDED) == 7
-    assert table_counts(db_path) == {"rooms": 3, "edges": 0, "places": 7, "fingerprints": 14}
+    counts = {"rooms": 3, "edges": 0, "places": 7, "fingerprints": 14, "legs": 0}
+    assert table_counts(db_path) == counts
     by_source = {Path(p.source).name: p for p in map_db.places()}
     assert by_source["pano_004.png"].room == "hall"
     assert (by_source["pano_004.png"].x_m, by_source["pano_004.png"].heading_deg) == (2.0, 40.0)

@@ -38,7 +38,8 @@ def test_build_then_rerun_is_idempotent(make_dataset, db_path: Path) -> None:
     assert "skipped 6 image(s) already in the map" in second.stdout
     third = build(dataset, db_path, "--workers", "0", "--verbose")
     assert "skipped img/pano_000.png: already in the map as place" in third.stderr
-    assert table_counts(db_path) == {"rooms": 3, "edges": 0, "places": 6, "fingerprints": 6}
+    counts = {"rooms": 3, "edges": 0, "places": 6, "fingerprints": 6, "legs": 0}
+    assert table_counts(db_path) == counts
 
 
 @pytest.mark.usefixtures("fake_extractor")

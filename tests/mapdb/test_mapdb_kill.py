@@ -95,5 +95,6 @@ def test_signal_mid_build_then_rerun_completes(
         "edges": 0,
         "places": N_IMAGES,
         "fingerprints": 2 * N_IMAGES,
+        "legs": 0,
     }
     assert_consistent(db_path)

@@ -146,6 +146,22 @@ GOOD_META = b'{"schema": 1, "kind": "add", "room": "kitchen"}'
         (None, b'{"schema": 1, "kind": "add", "room": "' + b"r" * 129 + b'"}', "'room'"),
         (None, b'{"schema": 1, "kind": "add", "room": "a\\nb"}', "control character"),
         (None, b'{"schema": 1, "kind": "add"}', "missing field 'room'"),
+        (None, b'{"schema": 1, "kind": "add", "room": "k", "leg_from": 1}', "odometry position"),
+        (
+            None,
+            b'{"schema": 1, "kind": "add", "room": "k", "x_m": 1, "y_m": 0, "leg_via": []}',
+            "'leg_via' needs 'leg_from'",
+        ),
+        (
+            None,
+            b'{"schema":1,"kind":"add","room":"k","x_m":1,"y_m":0,"leg_from":1,"leg_via":[[1]]}',
+            "field 'leg_via': leg via point 0 must be two finite numbers",
+        ),
+        (
+            None,
+            b'{"schema":1,"kind":"add","room":"k","x_m":1,"y_m":0,"leg_from":1,"leg_via":[7]}',
+            "field 'leg_via'",
+        ),
         (None, None, "empty payload"),
     ],
 )

@@ -104,3 +104,64 @@ def test_record_errors_are_one_line(tmp_path):
     assert nobody.exit_code == 1
     assert nobody.output.startswith("Error: toploc/rrec/base/odom: no reply")
     assert len(nobody.output.strip().splitlines()) == 1
+
+
+def test_every_metre_with_odometry_poses_stores_the_drive_between(service):
+    _, endpoint, db_path = service
+
+    def drive() -> None:
+        client = BusConfig(robot_id=ROBOT_ID, listen=(), connect=(endpoint,))
+        with open_session(client) as session:
+            robot = RemoteRobot(session, ROBOT_ID)
+            try:
+                if wait_for(lambda: len(places_of(db_path, "hall")) >= 1, 20):
+                    for _ in range(3):
+                        robot.move(0.0, 0.4)  # 1.2 m in three moves, each polled
+            finally:
+                robot.close()
+
+    driver = threading.Thread(target=drive, daemon=True)
+    driver.start()
+    result = record(endpoint, "--room", "hall", "--every-m", "1.0", "--count", "2")
+    driver.join(30)
+    assert result.exit_code == 0, result.output
+    first, second = places_of(db_path, "hall")
+    assert first.leg is None
+    assert second.leg is not None and second.leg.from_place == first.id
+    assert f"driven from place {first.id}" in result.output
+    start, end = (first.x_m, first.y_m), (second.x_m, second.y_m)
+    for point in second.leg.via_xy_m:  # on the straight drive between the two
+        assert math.dist(start, point) + math.dist(point, end) == pytest.approx(
+            math.dist(start, end), abs=0.01
+        )
+
+
+def test_after_joins_the_recording_to_a_place_recorded_before(service):
+    _, endpoint, db_path = service
+    assert record(endpoint, "--room", "hall").exit_code == 0
+    (first,) = places_of(db_path, "hall")
+    with open_session(BusConfig(robot_id=ROBOT_ID, listen=(), connect=(endpoint,))) as session:
+        robot = RemoteRobot(session, ROBOT_ID)
+        try:
+            robot.move(0.3, 0.37)  # driven on, the odometry not restarted
+        finally:
+            robot.close()
+    result = record(endpoint, "--room", "kitchen", "--after", str(first.id))
+    assert result.exit_code == 0, result.output
+    (added,) = [p for p in places_of(db_path, "kitchen") if p.leg is not None]
+    assert added.leg.from_place == first.id and added.leg.via_xy_m == ()
+
+
+def test_after_a_place_the_map_lacks_adds_nothing_and_says_so(service):
+    _, endpoint, db_path = service
+    result = record(endpoint, "--room", "hall", "--after", "9999")
+    assert result.exit_code == 1
+    assert "field 'leg_from'" in result.output and "9999" in result.output
+    assert places_of(db_path, "hall") == []
+
+
+def test_after_with_a_given_pose_is_refused():
+    usage = CliRunner().invoke(
+        main, ["map", "record", "--room", "hall", "--no-pose", "--after", "3"]
+    )
+    assert usage.exit_code == 2 and "--after joins odometry poses" in usage.output

@@ -3,11 +3,13 @@ different spots of their identical frames; and what the likelihood makes of thei
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
+from localizer.active import localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import Localizer
 from mapdb.database import MapDatabase
@@ -141,3 +143,37 @@ def test_a_counterpart_recorded_by_eye_stands_off_the_spot(advised_by_eye):
         - shift
     )
     assert float(np.hypot(*miss)) == pytest.approx(0.15)
+
+
+@pytest.fixture(scope="module")
+def driven(tmp_path_factory):
+    """The corridor and twin offices, one place each, recorded on one drive (seed 3)."""
+    db = tmp_path_factory.mktemp("driven") / "map.db"
+    world = make_world("building")
+    places = record_map(world, 1, 3, db, rooms=ROOMS, camera=CAMERA, drive=True)
+    return db, places
+
+
+def test_a_drive_records_each_place_with_the_leg_from_the_one_before(driven):
+    db, places = driven
+    with MapDatabase.open(db, create=False, readonly=True) as map_db:
+        stored = map_db.places()
+    assert [p.id for p in stored] == [p.place_id for p in places]
+    assert stored[0].leg is None
+    for before, place in itertools.pairwise(stored):
+        assert place.leg is not None and place.leg.from_place == before.id
+        assert place.leg.via_xy_m  # through a door: the drive's odometry on the way
+    assert len({(p.x_m, p.y_m) for p in stored}) == len(stored)  # one frame, not one per room
+
+
+@pytest.mark.parametrize(("room", "seed"), [("office_b", 4), ("office_a", 5)])
+def test_twins_no_place_tells_apart_are_told_apart_by_a_recorded_route(driven, room, seed):
+    db, _ = driven
+    robot = SimulatedRobot.kidnapped(make_world("building"), room, seed=seed, camera=CAMERA)
+    result = localize_actively(Localizer(load_map(db)), robot)
+    assert result.first.state is LocalizationState.AMBIGUOUS
+    assert result.checks, "the twins are checked by driving their recorded routes"
+    assert all(check.confirmed == (check.room == room) for check in result.checks)
+    assert result.final.top[0] == room == robot.true_room()  # and it came back
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert result.distance_m >= sum(check.distance_m for check in result.checks)

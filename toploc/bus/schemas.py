@@ -100,9 +100,17 @@ EDGES = Schema("edges", {"edges": list})
 ADD = Schema(
     "add",
     {"room": str},
-    {"x_m": (float, NULL), "y_m": (float, NULL), "heading_deg": (float, NULL)},
+    {
+        "x_m": (float, NULL),
+        "y_m": (float, NULL),
+        "heading_deg": (float, NULL),
+        "leg_from": (int, NULL),
+        "leg_via": (list, NULL),
+    },
 )
-"""``map/add`` request: the JSON attachment of the PNG payload (pose in the room's frame)."""
+"""``map/add`` request: the JSON attachment of the PNG payload (pose in the room's frame, or
+in the odometry frame of a drive: then ``leg_from`` names the place recorded before on that
+drive and ``leg_via`` the odometry positions ``[[x_m, y_m], ...]`` driven between)."""
 ADDED = Schema(
     "added",
     {"place_id": int, "room": str, "new": bool, "fingerprints": dict},

@@ -7,7 +7,11 @@ the *odometry* frame, which starts wherever the base was switched on; not the ro
 ``--x-m/--y-m/--heading-deg``, or none (``--no-pose``). ``--every-m D`` keeps recording, one
 panorama each time the odometry position is D metres (straight line) from the last recording,
 while someone drives the robot (the odometry is asked for every 0.2 s), until Ctrl-C (or
-``--count``). ``--connect-room`` adds a room-graph edge (``map/connect``) after the first
+``--count``). With odometry poses each recording after the first is stored with its leg (the
+place before and the odometry positions driven between, :class:`mapdb.records.Leg`);
+``--after ID`` joins the first to place ID (recorded before on the same drive: the base not
+switched off since). Recorded routes let the active localizer tell apart look-alike rooms.
+``--connect-room`` adds a room-graph edge (``map/connect``) after the first
 recording. The running localizer uses the new places a moment later (the map node's reply says
 when), without a restart.
 """
@@ -23,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from localizer.robot_protocol import Pose2D
-from mapdb.records import check_name
+from mapdb.records import Leg, check_name
 from toploc import bus
 from toploc.commands.bus_client import client_session
 from toploc.commands.options import robot_id_option, service_endpoint_option, zenoh_config_option
@@ -46,15 +50,38 @@ def _checked_name(option: str, name: str | None) -> str | None:
         raise click.BadParameter(str(error), param_hint=option) from None
 
 
+TRAIL_STEP_M = 0.1
+"""``--every-m`` keeps an odometry position in a place's leg every this many metres driven."""
+
+
 class Recorder:
-    """Capture with ``robot`` and add to the map with ``client`` (both over one session)."""
+    """Capture with ``robot`` and add to the map with ``client`` (both over one session).
+
+    With odometry poses, each recording after the first (or after place ``after``) is stored
+    with its leg: the place recorded before and the odometry positions :meth:`saw` between
+    (:class:`mapdb.records.Leg`), so the active localizer can drive the route again."""
 
     def __init__(
-        self, robot: RemoteRobot, client: MapClient, room: str, pose: str, fixed: Pose
+        self,
+        robot: RemoteRobot,
+        client: MapClient,
+        room: str,
+        pose: str,
+        fixed: Pose,
+        after: int | None = None,
     ) -> None:
         self.robot, self.client, self.room = robot, client, room
         self.pose, self.fixed = pose, fixed
         self.count = 0
+        self.previous = after
+        self.trail: list[tuple[float, float]] = []
+
+    def saw(self, odometry: Pose2D) -> None:
+        """Keep ``odometry``'s position for the next place's leg if it is
+        :data:`TRAIL_STEP_M` from the last one kept."""
+        point = (odometry.x_m, odometry.y_m)
+        if not self.trail or math.dist(point, self.trail[-1]) >= TRAIL_STEP_M:
+            self.trail.append(point)
 
     def odometry(self) -> Pose2D:
         """The robot's odometry now: a ``base/odom`` query (a base driven by hand may publish
@@ -74,21 +101,28 @@ class Recorder:
         odometry = self.odometry()  # position and heading of one instant, just before capture
         capture = self.robot.capture()
         stored: Pose = (None, None, None)
+        leg = None
         if self.pose == "odometry":
             stored = (odometry.x_m, odometry.y_m, math.degrees(odometry.heading_rad))
+            if self.previous is not None:
+                leg = Leg(self.previous, tuple(self.trail[1:]))  # [0]: where the last one was
         elif self.pose == "given":
             stored = self.fixed
-        reply = self.client.add(encode_png(capture.image), self.room, *stored)
+        reply = self.client.add(encode_png(capture.image), self.room, *stored, leg=leg)
         self.count += 1
-        click.echo(describe_added(self.count, reply, self.pose, stored))
+        self.previous, self.trail = reply["place_id"], [(odometry.x_m, odometry.y_m)]
+        click.echo(describe_added(self.count, reply, self.pose, stored, leg))
         return odometry.x_m, odometry.y_m
 
 
-def describe_added(n: int, reply: dict[str, Any], pose: str, xyh: Pose) -> str:
+def describe_added(
+    n: int, reply: dict[str, Any], pose: str, xyh: Pose, leg: Leg | None = None
+) -> str:
     """One line for a recorded panorama."""
     x_m, y_m, heading = xyh
     parts = [] if x_m is None or y_m is None else [f"({x_m:.2f}, {y_m:.2f}) m"]
     parts += [] if heading is None else [f"{heading:.0f}°"]
+    parts += [] if leg is None else [f"driven from place {leg.from_place}"]
     frame = "odometry " if pose == "odometry" else ""
     where = frame + ", ".join(parts) if parts else "no pose"
     counts = ", ".join(f"{d} {k}" for d, k in sorted(reply["fingerprints"].items()))
@@ -116,6 +150,7 @@ def follow(
         time.sleep(POLL_S)
         try:
             odometry = recorder.odometry()
+            recorder.saw(odometry)
             if math.hypot(odometry.x_m - last[0], odometry.y_m - last[1]) >= every_m:
                 last = recorder.record()
         except (bus.BusTimeout, bus.BusReplyError, bus.BusMessageError) as error:
@@ -133,6 +168,15 @@ def follow(
 @click.option("--y-m", type=float, default=None, help="y in the room's frame, metres.")
 @click.option("--heading-deg", type=float, default=None, help="Heading in the room, degrees.")
 @click.option("--no-pose", is_flag=True, help="Store no pose (default: the robot's odometry pose).")
+@click.option(
+    "--after",
+    "after",
+    type=click.IntRange(min=1),
+    default=None,
+    metavar="PLACE_ID",
+    help="The robot drove here from this place, its odometry not restarted since: store the "
+    "leg between them (the active localizer can drive it back).",
+)
 @click.option(
     "--every-m",
     type=click.FloatRange(min=0, min_open=True),
@@ -163,6 +207,7 @@ def record_command(
     y_m: float | None,
     heading_deg: float | None,
     no_pose: bool,
+    after: int | None,
     every_m: float | None,
     count: int | None,
     robot_id: str,
@@ -191,12 +236,14 @@ def record_command(
     if count is not None and every_m is None:
         raise click.UsageError("--count goes with --every-m")
     pose = "none" if no_pose else "given" if any(v is not None for v in given) else "odometry"
+    if after is not None and pose != "odometry":
+        raise click.UsageError("--after joins odometry poses: drop --x-m/--y-m and --no-pose")
     try:
         with client_session(robot_id, zenoh_file, endpoints) as session:
             robot = RemoteRobot(session, robot_id, timeout_s)
             try:
                 client = MapClient(session, robot_id, timeout_s, max(timeout_s, ADD_TIMEOUT_S))
-                recorder = Recorder(robot, client, room, pose, given)
+                recorder = Recorder(robot, client, room, pose, given, after)
 
                 def connect() -> None:
                     if connect_room is not None:

@@ -93,6 +93,10 @@ class Trial:
             "frames": self.result.frames,
             "looks_elsewhere": self.result.looks_elsewhere,
             "ended": self.result.ended,
+            "route_checks": [
+                {"room": c.room, "start": c.start, "end": c.end, "confirmed": c.confirmed}
+                for c in self.result.checks
+            ],
             "success": self.success,
             "outcome": self.outcome,
             "seconds": self.seconds,
@@ -101,8 +105,10 @@ class Trial:
 
 def totals(trials: list[Trial]) -> dict[str, Any]:
     """Success rate, the five outcomes, first-look accuracy, means over the trials, why the
-    localizations ended (``endings``: count per :data:`localizer.active.ENDINGS` key met), and
-    the reliability of the final answers' stated probabilities."""
+    localizations ended (``endings``: count per :data:`localizer.active.ENDINGS` key met), how
+    the route checks came out (``route_checks``), how many robots ended in another room than
+    the one they were put in, and the reliability of the final answers' stated
+    probabilities."""
     n = len(trials)
     finals = [t.result.final for t in trials]
     stated = [final.top[1] for final in finals]
@@ -122,8 +128,21 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
         "mean_seconds": statistics.fmean(t.seconds for t in trials),
         "drove": sum(bool(t.result.visits) for t in trials),
         "endings": dict(sorted(Counter(t.result.ended for t in trials).items())),
+        "route_checks": _route_checks(trials),
+        "ended_elsewhere": sum(t.final_true_room != t.true_room for t in trials),
         "reliability": reliability(stated, right).to_json(),
     }
+
+
+def _route_checks(trials: list[Trial]) -> dict[str, int]:
+    """How the rooms checked by a recorded route came out: confirmed or not, for the room the
+    robot was put in (``own``) and for the others."""
+    counts = dict.fromkeys(("own_confirmed", "own_refuted", "other_confirmed", "other_refuted"), 0)
+    for trial in trials:
+        for check in trial.result.checks:
+            whose = "own" if check.room == trial.true_room else "other"
+            counts[f"{whose}_{'confirmed' if check.confirmed else 'refuted'}"] += 1
+    return counts
 
 
 def describe_endings(endings: dict[str, int]) -> str:

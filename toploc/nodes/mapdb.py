@@ -8,7 +8,9 @@ uses to talk to it.
   metres and headings in degrees in the frame of the place's room.
 - ``map/edges`` -> ``{"edges": [[room_a, room_b]]}`` (the undirected room graph)
 - ``map/add``: payload the panorama as PNG bytes, attachment ``{"kind": "add", "room",
-  "x_m"?, "y_m"?, "heading_deg"?}`` -> ``{"place_id", "room", "new", "fingerprints":
+  "x_m"?, "y_m"?, "heading_deg"?, "leg_from"?, "leg_via"?}`` (a place recorded on a drive:
+  the place before it, and the odometry positions ``[[x_m, y_m], ...]`` between them, see
+  :class:`mapdb.records.Leg`) -> ``{"place_id", "room", "new", "fingerprints":
   {detector: n}, "refresh_after_s"}``. The image is checked (at most ``max_image_bytes``, a PNG
   of at most ``max_image_pixels`` by its header) before it is decoded; each detector the map
   holds is extracted (:func:`toploc.extraction.extract_image`, the path of ``toploc map add``)
@@ -44,8 +46,8 @@ import zenoh
 
 from localizer.panorama_io import decode_grey
 from mapdb.database import MapDatabase
-from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownRoomError
-from mapdb.records import NewPlace, Place, check_name
+from mapdb.errors import DuplicatePlaceError, MapDatabaseError, UnknownPlaceError, UnknownRoomError
+from mapdb.records import Leg, NewPlace, Place, check_name
 from mapdb.replica import MAX_CHANGES, read_changes, read_snapshot
 from mapdb.replication import CHUNK_BYTES, encode_changes, encode_snapshot, sha256_hex, split_chunks
 from toploc import bus
@@ -259,7 +261,24 @@ class MapNode(Node):
             raise _named(where, "room", error) from None
         if (meta.get("x_m") is None) != (meta.get("y_m") is None):
             raise bus.BusMessageError(f"{where}: give both 'x_m' and 'y_m', or neither")
+        if meta.get("leg_via") is not None and meta.get("leg_from") is None:
+            raise bus.BusMessageError(f"{where}: 'leg_via' needs 'leg_from'")
+        if meta.get("leg_from") is not None and meta.get("x_m") is None:
+            raise bus.BusMessageError(
+                f"{where}: a place with 'leg_from' needs its odometry position 'x_m', 'y_m'"
+            )
         return meta
+
+    @staticmethod
+    def _leg(where: str, meta: dict[str, Any]) -> Leg | None:
+        """The :class:`Leg` a ``map/add`` request names, if any (BusMessageError if malformed)."""
+        if meta.get("leg_from") is None:
+            return None
+        via = meta.get("leg_via") or []
+        try:
+            return Leg(meta["leg_from"], tuple(tuple(point) for point in via))
+        except (TypeError, ValueError) as error:
+            raise _named(where, "leg_via" if via else "leg_from", ValueError(str(error))) from None
 
     def _on_add(self, payload: bytes | None, attachment: bytes | None) -> bus.Reply:
         from toploc.extraction import extract_image, map_overrides
@@ -271,6 +290,7 @@ class MapNode(Node):
         data = check_png(where, payload, self.limits.max_image_bytes)
         image = decode_grey(data, where, self.limits.max_image_pixels)
         sha = hashlib.sha256(data).hexdigest()
+        leg = self._leg(where, meta)
         place = NewPlace(
             room=meta["room"],
             image_sha256=sha,
@@ -279,6 +299,7 @@ class MapNode(Node):
             y_m=meta.get("y_m"),
             heading_deg=meta.get("heading_deg"),
             captured_utc=None,
+            leg=leg,
         )
         with self._open_writable(where) as map_db:
             presets = tuple(map_db.fingerprint_counts()) or self.detectors
@@ -288,6 +309,10 @@ class MapNode(Node):
             except DuplicatePlaceError as error:
                 place_id, new = error.place_id, False
                 _check_same_place(where, map_db.place(place_id), place)
+            except UnknownPlaceError as error:  # the leg's first place
+                raise _named(where, "leg_from", ValueError(str(error))) from None
+            except ValueError as error:  # a leg from a place without a position
+                raise _named(where, "leg_from", error) from None
             if new:
                 self._changed("add", map_db)
         _log.info(

@@ -9,6 +9,7 @@ from typing import Any
 
 import zenoh
 
+from mapdb.records import Leg
 from toploc import bus
 from toploc.bus.clients.base import Client
 from toploc.bus.schemas import ADD, ADDED, CHANGED, CONNECT, CONNECTED, PLACES, PLACES_QUERY
@@ -54,13 +55,18 @@ class MapClient(Client):
         x_m: float | None = None,
         y_m: float | None = None,
         heading_deg: float | None = None,
+        leg: Leg | None = None,
     ) -> dict[str, Any]:
         """Add the panorama ``png`` as a place of ``room`` (pose optional, in the room's frame,
-        or another frame the caller documents); the reply (``place_id``, ``new``, ...)."""
+        or another frame the caller documents: an odometry pose, with the ``leg`` driven from
+        the place recorded before); the reply (``place_id``, ``new``, ...)."""
         meta: dict[str, Any] = {"room": room}
         for name, value in (("x_m", x_m), ("y_m", y_m), ("heading_deg", heading_deg)):
             if value is not None:
                 meta[name] = value
+        if leg is not None:
+            meta["leg_from"] = leg.from_place
+            meta["leg_via"] = [list(point) for point in leg.via_xy_m]
         key_expr = self.key(bus.MAP_ADD)
         sample = bus.request(
             self.session, key_expr, png, self.add_timeout_s, attachment=ADD.encode(meta)

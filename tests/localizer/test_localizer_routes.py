@@ -1,0 +1,158 @@
+"""Recorded routes: places joined by the legs they were recorded on, the shortest way out of a
+room, and driving a route (and back) by odometry."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from localizer.robot_protocol import MoveResult, Pose2D
+from localizer.routes import (
+    ODOMETRY,
+    DriveFrame,
+    Route,
+    drive_route,
+    leg_graph,
+    retrace_route,
+    route_out,
+)
+from mapdb.records import Leg, Place
+
+# office place 1 -> office place 2 -> (through the door) corridor place 3 -> kitchen place 4
+PLACES = (
+    Place(1, "office", 0.0, 0.0, 0.0),
+    Place(2, "office", 1.0, 0.0, 90.0, leg=Leg(1)),
+    Place(3, "corridor", 1.0, 3.0, 90.0, leg=Leg(2, ((1.0, 1.0), (1.5, 2.0)))),
+    Place(4, "kitchen", 5.0, 3.0, 0.0, leg=Leg(3)),
+    Place(5, "office", None, None, None),  # carried there: no leg
+)
+
+
+def test_places_are_joined_by_the_legs_they_were_recorded_on() -> None:
+    graph = leg_graph(PLACES)
+    assert sorted(graph.edges) == [(1, 2), (2, 3), (3, 4)]
+    assert graph.edges[2, 3]["points"] == ((1.0, 0.0), (1.0, 1.0), (1.5, 2.0), (1.0, 3.0))
+    assert graph.edges[1, 2]["length_m"] == pytest.approx(1.0)
+    assert 5 not in graph
+
+
+def test_a_leg_from_a_place_without_a_position_joins_nothing() -> None:
+    places = (Place(1, "office"), Place(2, "office", 1.0, 0.0, 0.0, leg=Leg(1)))
+    assert leg_graph(places).number_of_edges() == 0
+
+
+def test_the_way_out_is_the_shortest_route_to_another_room() -> None:
+    route = route_out(leg_graph(PLACES), PLACES, 1, {"office"}, max_length_m=20.0)
+    assert route is not None
+    assert (route.start, route.end) == (1, 3)
+    assert route.start_xy_m == (0.0, 0.0)
+    assert route.waypoints_xy_m == ((1.0, 0.0), (1.0, 1.0), (1.5, 2.0), (1.0, 3.0))
+    assert route.length_m == pytest.approx(1.0 + 1.0 + math.hypot(0.5, 1.0) * 2)
+
+
+def test_the_way_out_leaves_every_room_named() -> None:
+    route = route_out(leg_graph(PLACES), PLACES, 1, {"office", "corridor"}, max_length_m=20.0)
+    assert route is not None and route.end == 4
+
+
+def test_no_route_out_for_a_place_without_legs_or_beyond_the_longest() -> None:
+    graph = leg_graph(PLACES)
+    assert route_out(graph, PLACES, 5, {"office"}, max_length_m=20.0) is None
+    assert route_out(graph, PLACES, 1, {"office"}, max_length_m=2.0) is None
+
+
+def test_a_route_driven_back_ends_where_it_started() -> None:
+    route = Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0)
+    assert route.back() == Route(3, 1, (1.0, 3.0), ((1.0, 0.0), (0.0, 0.0)), 4.0)
+
+
+poses = st.builds(
+    Pose2D,
+    st.floats(-50, 50),
+    st.floats(-50, 50),
+    st.floats(-math.pi, math.pi),
+)
+
+
+@given(at=poses, anchor=poses, step=poses)
+def test_a_drive_frame_moves_odometry_rigidly(at: Pose2D, anchor: Pose2D, step: Pose2D) -> None:
+    frame = DriveFrame(at, anchor)
+    start = frame.pose(anchor)
+    assert (start.x_m, start.y_m) == pytest.approx((at.x_m, at.y_m), abs=1e-9)
+    later = frame.pose(step)
+    odometry_m = math.hypot(step.x_m - anchor.x_m, step.y_m - anchor.y_m)
+    driven_m = math.hypot(later.x_m - at.x_m, later.y_m - at.y_m)
+    assert driven_m == pytest.approx(odometry_m, abs=1e-6)
+    turn = math.remainder(later.heading_rad - at.heading_rad, 2 * math.pi)
+    odometry_turn = math.remainder(step.heading_rad - anchor.heading_rad, 2 * math.pi)
+    assert math.remainder(turn - odometry_turn, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+
+
+class PlanRobot:
+    """Moves exactly as told (its odometry is the truth), except that contact stops a move
+    into the wall y = ``wall_y_m`` anywhere but in its door (|x| < ``door_half_m``)."""
+
+    def __init__(self, pose: Pose2D, wall_y_m: float = math.inf, door_half_m: float = 0.3):
+        self.pose, self.wall_y_m, self.door_half_m = pose, wall_y_m, door_half_m
+        self.bumps = 0
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        heading = self.pose.heading_rad + turn_rad
+        x, y = self.pose.x_m, self.pose.y_m
+        steps = max(1, math.ceil(abs(forward_m) / 0.01))
+        moved, bumped = 0.0, False
+        for i in range(1, steps + 1):
+            s = forward_m * i / steps
+            nx, ny = x + s * math.cos(heading), y + s * math.sin(heading)
+            crosses = (y < self.wall_y_m) != (ny < self.wall_y_m)
+            if crosses and abs(nx) >= self.door_half_m:
+                bumped = True
+                break
+            moved = s
+        self.bumps += bumped
+        self.pose = Pose2D(x + moved * math.cos(heading), y + moved * math.sin(heading), heading)
+        return MoveResult(turn_rad, moved, bumped)
+
+    def odometry(self) -> Pose2D:
+        return self.pose
+
+    def capture(self):  # pragma: no cover - routes do not look
+        raise AssertionError("a route is driven blind")
+
+    def stop(self) -> None:
+        """Nothing to stop."""
+
+
+def test_a_route_is_driven_through_its_waypoints_on_the_odometry() -> None:
+    robot = PlanRobot(Pose2D(0.0, 0.0, 2.0))
+    route = Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0)
+    drive = drive_route(robot, route, ODOMETRY)
+    assert (robot.pose.x_m, robot.pose.y_m) == pytest.approx((1.0, 3.0))
+    assert drive.distance_m == pytest.approx(4.0)
+    assert drive.trail_xy_m[0] == (0.0, 0.0) and drive.bumps == 0
+
+
+def test_a_route_is_steered_in_the_frame_of_its_start_place() -> None:
+    robot = PlanRobot(Pose2D(10.0, 5.0, 0.0))  # its odometry knows nothing of the route's frame
+    frame = DriveFrame(Pose2D(0.0, 0.0, math.pi / 2), robot.odometry())  # at (0, 0), facing +y
+    drive_route(robot, Route(1, 2, (0.0, 0.0), ((0.0, 2.0),), 2.0), frame)
+    assert (robot.pose.x_m, robot.pose.y_m) == pytest.approx((12.0, 5.0))  # straight ahead
+
+
+def test_a_door_frame_grazed_is_slid_past() -> None:
+    robot = PlanRobot(Pose2D(0.35, 0.0, 0.0), wall_y_m=1.0)  # really 5 cm beyond the door
+    believed = DriveFrame(Pose2D(0.25, 0.0, 0.0), robot.odometry())  # the drift: 10 cm
+    drive_route(robot, Route(1, 2, (0.25, 0.0), ((0.25, 2.0),), 2.0), believed)
+    assert robot.bumps >= 1
+    assert robot.pose.y_m == pytest.approx(2.0, abs=0.05)  # through the door
+
+
+def test_a_route_retraced_brings_the_robot_back_to_its_start() -> None:
+    robot = PlanRobot(Pose2D(0.0, 0.0, 0.0))
+    drive = drive_route(robot, Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0), ODOMETRY)
+    robot.move(1.0, 0.7)  # homing moved it on a little
+    retrace_route(robot, drive)
+    assert (robot.pose.x_m, robot.pose.y_m) == pytest.approx((0.0, 0.0), abs=1e-6)
