@@ -116,13 +116,17 @@ class RouteCheck:
     """One room checked by a recorded route: the robot homed to place ``start`` of ``room``,
     drove the route to place ``end`` (of another room), homed to it, and drove back;
     ``confirmed``: the homing to ``end`` arrived at once (the robot was where the route ends
-    if it started in ``room``); ``distance_m``: odometric metres of the whole check."""
+    if it started in ``room``); ``distance_m``: odometric metres of the whole check;
+    ``end_inliers``: the spread inliers of the view where the route ended with ``end``'s;
+    ``end_homing_m``: how far the homing to ``end`` drove (0: the route was not driven)."""
 
     room: str
     start: int
     end: int
     confirmed: bool
     distance_m: float
+    end_inliers: float = 0.0
+    end_homing_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -284,17 +288,22 @@ def _route_to_check(
     tried: set[int],
     params: ActiveParams,
 ) -> tuple[Place, Route] | None:
-    """A place to check a likely room from, and its recorded route out of the room and its
-    look-alikes (else out of the room alone). The likely rooms (at least a tenth of the top
+    """A place to check a likely room from, and its recorded route out of the room to a room
+    that has no look-alike. The likely rooms (at least a tenth of the top
     one's probability) are taken from the most likely on; in each, the places with a route
     and a heading, not tried yet, from the one the latest frame matched best. None if there
     is none."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
     graph, places = localizer.map.legs, localizer.map.places
+    # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
+    # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
+    # bathroom_a and bedroom_a: a route between the two ends alike in both)
+    leave = {name for name, partners in localizer.lookalikes.items() if partners}
     top_p = belief.top[1]
     for room, p in belief.ranked():
         if p < LIKELY_SHARE * top_p:
             break
+        leave_room = leave | {room}
         starts = [
             place
             for place in places
@@ -304,10 +313,9 @@ def _route_to_check(
             and place.id not in tried
         ]
         for place in sorted(starts, key=lambda q: (-counts.get(q.id, 0.0), q.id)):
-            for leave in ({room, *localizer.lookalikes.get(room, ())}, {room}):
-                route = route_out(graph, places, place.id, leave, params.route_max_m)
-                if route is not None:
-                    return place, route
+            route = route_out(graph, places, place.id, leave_room, params.route_max_m)
+            if route is not None:
+                return place, route
     return None
 
 
@@ -358,13 +366,21 @@ def _check_route(
     to_start = home(start.id)
     distance += to_start.distance_m
     frames += len(to_start.lengths)
-    confirmed, at_end = False, to_start
+    confirmed, at_end, end_inliers = False, to_start, 0.0
     frame = _frame_at(localizer, robot, start, to_start, params)
     if frame is not None and to_start.reason != CANCELLED:
         out = drive_route(robot, route, frame)
         distance += out.distance_m
         end_view, end_odometry = localizer.extract(robot.capture().image), robot.odometry()
         frames += 1
+        end_inliers = next(
+            (
+                item.spread_inliers
+                for item in localizer.observe_fingerprint(end_view).evidence.places
+                if item.place_id == route.end
+            ),
+            0.0,
+        )
         at_end = home(route.end)
         distance += at_end.distance_m
         frames += len(at_end.lengths)
@@ -389,7 +405,10 @@ def _check_route(
     observation = localizer.observe(robot.capture().image)
     localizer.update(observation)
     frames += 1
-    check = RouteCheck(start.room, start.id, route.end, confirmed, distance)
+    end_homing_m = at_end.distance_m if at_end is not to_start else 0.0
+    check = RouteCheck(
+        start.room, start.id, route.end, confirmed, distance, end_inliers, end_homing_m
+    )
     return check, frames, at_end, observation
 
 

@@ -195,3 +195,18 @@ def test_a_twin_place_on_the_grid_has_its_counterpart_on_its_spot(localizer):
     assert any(same.values())
     for partners in same.values():
         assert {localizer.map.place(p).room for p in partners} <= {"office_b"}
+
+
+def test_a_route_check_is_folded_in_as_a_likelihood_per_room(localizer):
+    localizer.reset()
+    belief = localizer.update_rooms({"office_a": 9.0})
+    assert belief.as_dict()["office_a"] == pytest.approx(9 * belief.as_dict()["office_b"])
+    with pytest.raises(ValueError, match=r"no room \['attic'\]"):
+        localizer.update_rooms({"attic": 2.0})
+    with pytest.raises(ValueError, match="finite number >= 0"):
+        localizer.update_rooms({"office_a": -1.0})
+
+
+def test_active_params_refuse_route_rates_that_tell_nothing():
+    with pytest.raises(ValueError, match="route_false_rate < route_hit_rate"):
+        ActiveParams(route_hit_rate=0.5, route_false_rate=0.5)

@@ -94,7 +94,14 @@ class Trial:
             "looks_elsewhere": self.result.looks_elsewhere,
             "ended": self.result.ended,
             "route_checks": [
-                {"room": c.room, "start": c.start, "end": c.end, "confirmed": c.confirmed}
+                {
+                    "room": c.room,
+                    "start": c.start,
+                    "end": c.end,
+                    "confirmed": c.confirmed,
+                    "end_inliers": c.end_inliers,
+                    "end_homing_m": c.end_homing_m,
+                }
                 for c in self.result.checks
             ],
             "success": self.success,
