@@ -25,7 +25,15 @@ from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
 from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Pose2D, Robot
-from localizer.routes import ODOMETRY, DriveFrame, Route, drive_route, retrace_route, route_out
+from localizer.routes import (
+    ODOMETRY,
+    ROUTE_MAX_M,
+    DriveFrame,
+    Route,
+    drive_route,
+    retrace_route,
+    route_out,
+)
 from localizer.visual_homing import (
     HomingError,
     HomingParams,
@@ -78,7 +86,7 @@ class ActiveParams:
     lost_turn_deg: float = 120.0
     lost_step_m: float = 0.5
     min_new_view_m: float = 0.1
-    route_max_m: float = 15.0
+    route_max_m: float = ROUTE_MAX_M
     route_hit_rate: float = 0.9
     route_false_rate: float = 0.1
     route_slack_m: float = 1.0

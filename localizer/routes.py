@@ -27,6 +27,9 @@ from homing.bearings import wrap_angle_rad
 from localizer.robot_protocol import Pose2D, Robot
 from mapdb.records import Place
 
+ROUTE_MAX_M = 15.0
+"""The longest route the active localizer drives to check a room (metres)."""
+
 
 @dataclass(frozen=True)
 class Route:
@@ -101,6 +104,19 @@ def route_out(
     end = min(ends, key=lambda node: (lengths[node], node))
     points = _path_points(graph, paths[end])
     return Route(start, end, points[0], tuple(points[1:]), float(lengths[end]))
+
+
+def rooms_with_routes_out(
+    places: Sequence[Place], leave: Collection[str], max_length_m: float
+) -> set[str]:
+    """The rooms with a place that has a recorded route (at most ``max_length_m``) to a room
+    neither in ``leave`` nor the place's own."""
+    graph = leg_graph(places)
+    return {
+        place.room
+        for place in places
+        if route_out(graph, places, place.id, {*leave, place.room}, max_length_m) is not None
+    }
 
 
 @dataclass(frozen=True)

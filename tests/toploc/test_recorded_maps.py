@@ -103,6 +103,7 @@ def test_map_info_advises_two_spots_in_twins_without_counterparts(recorded):
     assert result.exit_code == 0, result.output
     assert "look-alike rooms: office_a ~ office_b" in result.output
     assert "same two spots" in result.output
+    assert "Record the drive from each through its door" in result.output  # or that
 
 
 def test_map_info_says_where_twins_can_be_told_apart(building_map):
@@ -177,3 +178,16 @@ def test_twins_no_place_tells_apart_are_told_apart_by_a_recorded_route(driven, r
     assert result.final.top[0] == room == robot.true_room()  # and it came back
     assert result.final.state is LocalizationState.LOCALIZED
     assert result.distance_m >= sum(check.distance_m for check in result.checks)
+
+
+def test_map_info_says_recorded_drives_tell_the_twins_apart(driven):
+    from click.testing import CliRunner
+
+    from toploc.cli import main
+
+    result = CliRunner().invoke(main, ["map", "info", "--db", str(driven[0])])
+    assert result.exit_code == 0, result.output
+    assert "office_a ~ office_b; no frame tells them apart, but each has a recorded drive" in (
+        result.output
+    )
+    assert "same two spots" not in result.output

@@ -414,8 +414,8 @@ def _calibrate(
             click.echo(f"declared look-alikes: {declare[0]} and {declare[1]}")
         click.echo(f"{explain_likelihood(detector, model)}{took}")
         with MapDatabase.open(db_path, readonly=True) as map_db:
-            room_of = {place.id: place.room for place in map_db.places()}
-        for line in lookalike_lines(model, room_of):
+            places = map_db.places()
+        for line in lookalike_lines(model, places):
             click.echo(line)
         if formula:
             click.echo(f"  {detector} likelihood: {describe_likelihood(model)}")
@@ -461,12 +461,12 @@ def info_command(db_path: Path, as_json: bool) -> None:
     version (what a site's replicas follow)."""
     with _map_errors(), MapDatabase.open(db_path, readonly=True) as map_db:
         info = map_db.info()
-        room_of = {place.id: place.room for place in map_db.places()}
+        places = map_db.places()
         identity = {"map_id": map_db.map_id(), "map_version": map_db.map_version()}
     if as_json:
         click.echo(json.dumps({**info.to_json(), **identity}, indent=2))
         return
-    click.echo(format_info(info, room_of))
+    click.echo(format_info(info, places))
     click.echo(f"map id {identity['map_id']}, version {identity['map_version']}")
 
 

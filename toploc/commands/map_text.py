@@ -4,11 +4,12 @@ in ``map info`` and with ``-v`` (:func:`describe_likelihood`). Pure: text from r
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Sequence
 
 from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts
-from mapdb.records import MapInfo
+from localizer.routes import ROUTE_MAX_M, rooms_with_routes_out
+from mapdb.records import MapInfo, Place
 
 
 def _counted(model: RatioLikelihood) -> str:
@@ -50,13 +51,18 @@ def explain_likelihood(detector: str, model: RatioLikelihood) -> str:
     )
 
 
-def lookalike_lines(model: RatioLikelihood, room_of: Mapping[int, str]) -> list[str]:
+def lookalike_lines(model: RatioLikelihood, places: Sequence[Place]) -> list[str]:
     """What the calibration found of look-alike rooms (:mod:`localizer.lookalikes`), and for
-    twins without counterparts what to record so that they can be told apart; ``room_of``:
-    each place id's room."""
+    twins without counterparts whether recorded routes tell them apart
+    (:mod:`localizer.routes`) or what to record so that they can be; ``places``: the map's."""
     if not model.lookalikes:
         return []
-    blind = pairs_without_counterparts(model.lookalikes, model.counterparts, room_of)
+    room_of = {place.id: place.room for place in places}
+    blind = list(pairs_without_counterparts(model.lookalikes, model.counterparts, room_of))
+    paired = {room for pair in model.lookalikes for room in pair}
+    routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M)
+    driven = [pair for pair in blind if set(pair) <= routed]
+    blind = [pair for pair in blind if pair not in driven]
     lines = []
     told = [pair for pair in model.lookalikes if pair not in blind]
     if told:
@@ -64,13 +70,20 @@ def lookalike_lines(model: RatioLikelihood, room_of: Mapping[int, str]) -> list[
             f"  look-alike rooms: {_pairs(told)}; some of their places stand at the same spots "
             "(counterparts): a frame there, or a drive to one, tells them apart"
         )
+    if driven:
+        lines.append(
+            f"  look-alike rooms: {_pairs(driven)}; no frame tells them apart, but each has a "
+            "recorded drive out to a room without a look-alike: an active localization drives "
+            "it out and back and tells them apart"
+        )
     if blind:
         lines.append(
             f"  look-alike rooms: {_pairs(blind)}; none of their places stand at the same spot "
-            "of both, so a frame cannot tell them apart (they stay ambiguous). Record two "
-            "places in each of them at the same two spots (the same distances from the same "
-            "corner, e.g. 1 m inside the door and the middle); an active localization then "
-            "drives there and tells them apart"
+            "of both, so a frame cannot tell them apart (they stay ambiguous). Record the drive "
+            "from each through its door into a room without a look-alike (toploc map record "
+            "--every-m, --after), or two places in each at the same two spots (the same "
+            "distances from the same corner, e.g. 1 m inside the door and the middle); an "
+            "active localization then drives there and tells them apart"
         )
     return lines
 
@@ -79,7 +92,7 @@ def _pairs(pairs: list[tuple[str, str]] | tuple[tuple[str, str], ...]) -> str:
     return ", ".join(f"{a} ~ {b}" for a, b in pairs)
 
 
-def format_info(info: MapInfo, room_of: Mapping[int, str] | None = None) -> str:
+def format_info(info: MapInfo, places: Sequence[Place] = ()) -> str:
     """``map info``'s text: rooms and places, fingerprints, edges, each likelihood's formula."""
     single = [room.name for room in info.rooms if room.n_places == 1]
     hint = (
@@ -92,7 +105,7 @@ def format_info(info: MapInfo, room_of: Mapping[int, str] | None = None) -> str:
         else []
     )
     models = [RatioLikelihood.from_json(model) for model in info.likelihoods.values()]
-    lookalikes = lookalike_lines(models[0], room_of or {}) if models else []
+    lookalikes = lookalike_lines(models[0], places) if models else []
     lines = [
         f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
         f"{len(info.rooms)} rooms, {info.n_places} places",
