@@ -22,8 +22,10 @@ judged it on seed 7. Session 15 judged the active loop's "one view, one piece of
 world seed 8 (record seed 9), the change written on world seed 4, then wrote the "standout" pair
 rule looking at seed 8 and judged it on seeds 9 and 10. Session 16 wrote the "far above
 chance" standout looking at seed 9's building (K = 3) and judged it on world seed 11 (record
-seed 12). World seeds 12 and up have not been looked at: the next change must be judged on
-them.
+seed 12). Session 18 (``--drive``, recorded routes) chose its rules on world seed 11, then on
+seeds 12 and 13 (record seeds 13, 14), and judged the last on seed 14 (record seed 15); the
+house of seeds 12-14 was not run. World seeds 15 and up have not been looked at: the next
+change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised

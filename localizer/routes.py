@@ -43,11 +43,6 @@ class Route:
     waypoints_xy_m: tuple[tuple[float, float], ...]
     length_m: float
 
-    def back(self) -> Route:
-        """The same path driven from ``end`` back to ``start``."""
-        points = (self.start_xy_m, *self.waypoints_xy_m)
-        return Route(self.end, self.start, points[-1], tuple(reversed(points[:-1])), self.length_m)
-
 
 def _length_m(points: Sequence[tuple[float, float]]) -> float:
     return sum(math.dist(a, b) for a, b in itertools.pairwise(points))

@@ -64,11 +64,6 @@ def test_no_route_out_for_a_place_without_legs_or_beyond_the_longest() -> None:
     assert route_out(graph, PLACES, 1, {"office"}, max_length_m=2.0) is None
 
 
-def test_a_route_driven_back_ends_where_it_started() -> None:
-    route = Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0)
-    assert route.back() == Route(3, 1, (1.0, 3.0), ((1.0, 0.0), (0.0, 0.0)), 4.0)
-
-
 poses = st.builds(
     Pose2D,
     st.floats(-50, 50),

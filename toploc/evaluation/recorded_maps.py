@@ -358,15 +358,12 @@ def record_map(
     if drive:
         driven = record_drive(world, places_per_room, seed, db_path, chosen, detectors, camera)
         recorded = [place.recorded for place in driven]
-    bar = tqdm(
-        chosen if not drive else (),
-        desc=f"record {world.name} x{places_per_room}",
-        disable=not progress,
-    )
-    for i, room in enumerate(bar):
-        recorded += record_room(
-            world, room, places_per_room, seed * 1000 + i, db_path, detectors, camera
-        )
+    else:
+        bar = tqdm(chosen, desc=f"record {world.name} x{places_per_room}", disable=not progress)
+        for i, room in enumerate(bar):
+            recorded += record_room(
+                world, room, places_per_room, seed * 1000 + i, db_path, detectors, camera
+            )
     with MapDatabase.open(db_path, create=False) as map_db:
         for door in world.doors:
             if door.room_a in chosen and door.room_b in chosen:
