@@ -343,34 +343,18 @@ def _route_to_check(
     return None
 
 
-def _frame_at(
-    localizer: Localizer, robot: Robot, place: Place, homed: HomingResult, params: ActiveParams
-) -> DriveFrame | None:
-    """The drive frame of ``place``'s leg for a robot that has just homed to it: the robot at
-    the place's position, its heading the place's turned by the rotation between the last
-    view and the place's (None if they do not match, or the place has no pose)."""
-    if place.x_m is None or place.y_m is None or place.heading_deg is None:
-        return None
-    try:
-        goal = localizer.map.fingerprint(place.id)
-        _, shift_rad = matched_inliers(homed.last, goal, params.homing.step)
-    except HomingError:
-        return None
-    heading_rad = math.radians(place.heading_deg) - shift_rad
-    return DriveFrame(Pose2D(place.x_m, place.y_m, heading_rad), robot.odometry())
-
-
 def _frame_by_view(
-    robot: Robot, view: Fingerprint, odometry: Pose2D, homed: HomingResult, params: ActiveParams
-) -> DriveFrame:
-    """The odometry frame of a drive, fixed again for a robot that has homed back to a
-    ``view`` it took at ``odometry``: there, turned by the rotation between the views (its
-    odometry as it is, if they do not match)."""
+    robot: Robot, view: Fingerprint, pose: Pose2D, homed: HomingResult, params: ActiveParams
+) -> DriveFrame | None:
+    """A drive frame fixed for a robot that has just homed to ``view``, taken at ``pose`` in
+    that frame (a place's stored view and pose, or a view the robot took on the drive and its
+    odometry then): the robot at ``pose``'s position, its heading ``pose``'s turned by the
+    rotation between its last view and ``view``; None if they do not match."""
     try:
         _, shift_rad = matched_inliers(homed.last, view, params.homing.step)
     except HomingError:
-        return ODOMETRY
-    at = Pose2D(odometry.x_m, odometry.y_m, odometry.heading_rad - shift_rad)
+        return None
+    at = Pose2D(pose.x_m, pose.y_m, pose.heading_rad - shift_rad)
     return DriveFrame(at, robot.odometry())
 
 
@@ -391,7 +375,8 @@ def _check_route(
     distance += to_start.distance_m
     frames += len(to_start.lengths)
     confirmed, at_end, end_inliers = False, to_start, 0.0
-    frame = _frame_at(localizer, robot, start, to_start, params)
+    stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
+    frame = _frame_by_view(robot, localizer.map.fingerprint(start.id), stored, to_start, params)
     if frame is not None and to_start.reason != CANCELLED:
         out = drive_route(robot, route, frame)
         distance += out.distance_m
@@ -417,7 +402,7 @@ def _check_route(
             distance += to_end_view.distance_m
             frames += len(to_end_view.lengths)
             again = _frame_by_view(robot, end_view, end_odometry, to_end_view, params)
-            distance += retrace_route(robot, out, again).distance_m
+            distance += retrace_route(robot, out, again or ODOMETRY).distance_m
             back = home(start.id)
             distance += back.distance_m
             frames += len(back.lengths)
