@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import CANCELLED, ENDINGS, ActiveParams, localize_actively
+from localizer.active import CANCELLED, ENDINGS, ActiveParams, localize_actively, rooms_to_check
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
@@ -210,3 +210,16 @@ def test_a_route_check_is_folded_in_as_a_likelihood_per_room(localizer):
 def test_active_params_refuse_route_rates_that_tell_nothing():
     with pytest.raises(ValueError, match="route_false_rate < route_hit_rate"):
         ActiveParams(route_hit_rate=0.5, route_false_rate=0.5)
+
+
+def test_a_room_whose_check_did_not_arrive_is_checked_after_its_rival(localizer):
+    localizer.reset()
+    belief = localizer.update_rooms({"office_a": 30.0, "office_b": 20.0})
+    assert rooms_to_check(belief, {}) == ["office_a", "office_b"]
+    assert rooms_to_check(belief, {"office_a": 1}) == ["office_b", "office_a"]
+
+
+def test_only_likely_rooms_are_checked_by_a_route(localizer):
+    localizer.reset()
+    belief = localizer.update_rooms({"office_a": 100.0})
+    assert rooms_to_check(belief, {"office_a": 1}) == ["office_a"]
