@@ -166,7 +166,8 @@ def print_table(rows: list[dict[str, Any]]) -> None:
     names = " ".join(f"{SHORT[o]:>4s}" for o in OUTCOMES)
     print(
         f"| world | K | first look {names} | final {names} | drove | drives | m | s "
-        "| >=0.9 right | Brier | ended | route checks own +/-, other +/- | elsewhere |"
+        "| >=0.9 right | Brier | ended | route checks own +/-, other +/- | elsewhere "
+        "| R+L where put |"
     )
     for row in rows:
         t = row["totals"]
@@ -178,7 +179,7 @@ def print_table(rows: list[dict[str, Any]]) -> None:
             f"{t['drove']}/{t['trials']} | {t['mean_steps']:.2f} | {t['mean_distance_m']:.2f} | "
             f"{t['mean_seconds']:.1f} | {confident(t)} | {t['reliability']['brier']:.3f} "
             f"| {describe_endings(t['endings'])} | {_checks(t['route_checks'])} "
-            f"| {t['ended_elsewhere']} |"
+            f"| {t['ended_elsewhere']} | {t['right_where_put']} |"
         )
 
 

@@ -158,6 +158,8 @@ def test_sim_kidnap_reports_each_trial_and_the_totals(building_map, tmp_path):
     assert report["totals"]["trials"] == 1
     assert report["totals"]["success_rate"] == float(trial["success"])
     assert report["totals"]["endings"] == {trial["ended"]: 1}
+    put_back = trial["success"] and trial["end_room"] == trial["true_room"]
+    assert report["totals"]["right_where_put"] == int(put_back)
     assert f"ended: {trial['ended']} 1" in result.output
 
 

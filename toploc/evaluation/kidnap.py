@@ -114,8 +114,10 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
     """Success rate, the five outcomes, first-look accuracy, means over the trials, why the
     localizations ended (``endings``: count per :data:`localizer.active.ENDINGS` key met), how
     the route checks came out (``route_checks``), how many robots ended in another room than
-    the one they were put in, and the reliability of the final answers' stated
-    probabilities."""
+    the one they were put in (``ended_elsewhere``), how many ended right and localized in the
+    room they were put in (``right_where_put``: they answered the question the kidnapping
+    asked; a robot that wandered into the corridor and named it did not), and the
+    reliability of the final answers' stated probabilities."""
     n = len(trials)
     finals = [t.result.final for t in trials]
     stated = [final.top[1] for final in finals]
@@ -137,6 +139,7 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
         "endings": dict(sorted(Counter(t.result.ended for t in trials).items())),
         "route_checks": _route_checks(trials),
         "ended_elsewhere": sum(t.final_true_room != t.true_room for t in trials),
+        "right_where_put": sum(t.success and t.final_true_room == t.true_room for t in trials),
         "reliability": reliability(stated, right).to_json(),
     }
 
