@@ -8,16 +8,15 @@ positions to drive through. Look-alike rooms that no place tells apart are told 
 (:mod:`localizer.active`): a robot that homed to a place of one twin drives that twin's route
 out of the room; if it is in the other twin, the same drive ends somewhere else.
 
-:func:`leg_graph` and :func:`route_out` are pure; :func:`drive_route` moves a
-:class:`~localizer.robot_protocol.Robot` along a route, steering on its odometry, and
-:func:`retrace_route` drives it back along its own odometry trail.
+:func:`leg_graph`, :func:`route_out` and :func:`route_into` are pure; :func:`drive_route`
+moves a :class:`~localizer.robot_protocol.Robot` along a route, steering on its odometry.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -88,12 +87,35 @@ def route_out(
     """The shortest recorded route from place ``start`` to a place of a room not in
     ``leave`` (the rooms to get out of), at most ``max_length_m`` long; None if there is
     none (``start`` has no leg, or every route is longer)."""
+    return _shortest_route(graph, places, start, lambda room: room not in leave, max_length_m)
+
+
+def route_into(
+    graph: nx.Graph,
+    places: Sequence[Place],
+    start: int,
+    rooms: Collection[str],
+    max_length_m: float,
+) -> Route | None:
+    """The shortest recorded route from place ``start`` to another place of one of
+    ``rooms``, at most ``max_length_m`` long; None if there is none."""
+    return _shortest_route(graph, places, start, lambda room: room in rooms, max_length_m)
+
+
+def _shortest_route(
+    graph: nx.Graph,
+    places: Sequence[Place],
+    start: int,
+    wanted: Callable[[str], bool],
+    max_length_m: float,
+) -> Route | None:
+    """The shortest route from place ``start`` to another place whose room is ``wanted``."""
     if start not in graph:
         return None
     room_of = {place.id: place.room for place in places}
     found = nx.single_source_dijkstra(graph, start, cutoff=max_length_m, weight="length_m")
     lengths, paths = cast(tuple[dict[int, float], dict[int, list[int]]], found)
-    ends = [node for node in lengths if room_of.get(node) not in (None, *leave)]
+    ends = [node for node in lengths if node != start and node in room_of and wanted(room_of[node])]
     if not ends:
         return None
     end = min(ends, key=lambda node: (lengths[node], node))
@@ -117,15 +139,13 @@ def rooms_with_routes_out(
 @dataclass(frozen=True)
 class RouteDrive:
     """How a drive along a route went: the moves made, the odometric distance (metres), how
-    many moves contact stopped, the robot's pose in the drive frame at the end (as its
-    odometry has it), and its odometry positions before the first move and after each
-    (``trail_xy_m``, odometry frame: what :func:`retrace_route` drives back along)."""
+    many moves contact stopped, and the robot's pose in the drive frame at the end (as its
+    odometry has it)."""
 
     moves: int
     distance_m: float
     bumps: int
     end: Pose2D
-    trail_xy_m: tuple[tuple[float, float], ...] = ()
 
 
 class DriveFrame:
@@ -154,15 +174,20 @@ SLIDE_M = 0.3
 ARRIVED_M = 0.05
 
 
-def drive_route(robot: Robot, route: Route, frame: DriveFrame) -> RouteDrive:
+def drive_route(
+    robot: Robot,
+    route: Route,
+    frame: DriveFrame,
+    at_waypoint: Callable[[int], None] | None = None,
+) -> RouteDrive:
     """Drive ``robot`` through the route's waypoints, each a turn toward it and a straight
     drive, steering on the pose ``frame`` gives its odometry. After contact the robot backs
     off and slides past (:data:`SLIDE_DEG`), then aims at the waypoint again; when every slide
     is tried it goes on to the next waypoint (the robot may be in a look-alike room where the
-    route does not fit; where it ends says so)."""
+    route does not fit; where it ends says so). ``at_waypoint(i)`` is called when the robot is
+    done with waypoint ``i`` (to take a view there, say)."""
     moves, distance_m, bumps = 0, 0.0, 0
     odometry = robot.odometry()
-    trail = [(odometry.x_m, odometry.y_m)]
 
     def move(turn_rad: float, forward_m: float) -> bool:
         nonlocal moves, distance_m, bumps, odometry
@@ -171,10 +196,9 @@ def drive_route(robot: Robot, route: Route, frame: DriveFrame) -> RouteDrive:
         distance_m += abs(moved.moved_m)
         bumps += bool(moved.bumped)
         odometry = robot.odometry()
-        trail.append((odometry.x_m, odometry.y_m))
         return bool(moved.bumped)
 
-    for x_m, y_m in route.waypoints_xy_m:
+    for index, (x_m, y_m) in enumerate(route.waypoints_xy_m):
         for slide_deg in (None, *SLIDE_DEG):
             here = frame.pose(robot.odometry())
             dx, dy = x_m - here.x_m, y_m - here.y_m
@@ -192,19 +216,19 @@ def drive_route(robot: Robot, route: Route, frame: DriveFrame) -> RouteDrive:
             turn_rad = float(wrap_angle_rad(bearing_rad - here.heading_rad))
             if not move(turn_rad, math.hypot(dx, dy)):
                 break
-    return RouteDrive(moves, distance_m, bumps, frame.pose(odometry), tuple(trail))
+        if at_waypoint is not None:
+            at_waypoint(index)
+    return RouteDrive(moves, distance_m, bumps, frame.pose(odometry))
+
+
+def route_through(
+    here_xy_m: tuple[float, float], points_xy_m: Sequence[tuple[float, float]]
+) -> Route:
+    """A route through ``points_xy_m`` from ``here_xy_m`` (a drive frame's metres) that no
+    recording made: a way back, say (``start`` and ``end`` 0: no place)."""
+    points = (here_xy_m, *points_xy_m)
+    return Route(0, 0, here_xy_m, tuple(points_xy_m), _length_m(points))
 
 
 ODOMETRY = DriveFrame(Pose2D(0.0, 0.0, 0.0), Pose2D(0.0, 0.0, 0.0))
 """The drive frame that is the odometry frame itself."""
-
-
-def retrace_route(robot: Robot, drive: RouteDrive, frame: DriveFrame = ODOMETRY) -> RouteDrive:
-    """Drive back along ``drive``'s odometry trail to where that drive began: the same moves
-    undone, whichever room the robot turned out to be in. ``frame`` gives the robot's pose in
-    the odometry frame of ``drive`` (default: its odometry as it is; a frame fixed again by
-    a view where the drive ended removes the drift since)."""
-    here = frame.pose(robot.odometry())
-    trail = drive.trail_xy_m
-    back = Route(0, 0, (here.x_m, here.y_m), tuple(reversed(trail)), _length_m(trail))
-    return drive_route(robot, back, frame)

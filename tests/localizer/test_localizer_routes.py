@@ -16,8 +16,9 @@ from localizer.routes import (
     Route,
     drive_route,
     leg_graph,
-    retrace_route,
+    route_into,
     route_out,
+    route_through,
 )
 from mapdb.records import Leg, Place
 
@@ -62,6 +63,18 @@ def test_no_route_out_for_a_place_without_legs_or_beyond_the_longest() -> None:
     graph = leg_graph(PLACES)
     assert route_out(graph, PLACES, 5, {"office"}, max_length_m=20.0) is None
     assert route_out(graph, PLACES, 1, {"office"}, max_length_m=2.0) is None
+
+
+def test_the_way_into_a_room_is_the_shortest_route_to_one_of_its_places() -> None:
+    route = route_into(leg_graph(PLACES), PLACES, 4, {"office"}, max_length_m=20.0)
+    assert route is not None and (route.start, route.end) == (4, 2)  # place 2 is nearer than 1
+    assert route.waypoints_xy_m[-1] == (1.0, 0.0)
+    assert route_into(leg_graph(PLACES), PLACES, 4, {"office"}, max_length_m=5.0) is None
+
+
+def test_the_way_into_its_own_room_leads_to_another_place_of_it() -> None:
+    route = route_into(leg_graph(PLACES), PLACES, 1, {"office"}, max_length_m=20.0)
+    assert route is not None and route.end == 2
 
 
 poses = st.builds(
@@ -127,7 +140,7 @@ def test_a_route_is_driven_through_its_waypoints_on_the_odometry() -> None:
     drive = drive_route(robot, route, ODOMETRY)
     assert (robot.pose.x_m, robot.pose.y_m) == pytest.approx((1.0, 3.0))
     assert drive.distance_m == pytest.approx(4.0)
-    assert drive.trail_xy_m[0] == (0.0, 0.0) and drive.bumps == 0
+    assert drive.bumps == 0
 
 
 def test_a_route_is_steered_in_the_frame_of_its_start_place() -> None:
@@ -145,9 +158,20 @@ def test_a_door_frame_grazed_is_slid_past() -> None:
     assert robot.pose.y_m == pytest.approx(2.0, abs=0.05)  # through the door
 
 
-def test_a_route_retraced_brings_the_robot_back_to_its_start() -> None:
+def test_a_route_says_when_the_robot_is_done_with_each_waypoint() -> None:
     robot = PlanRobot(Pose2D(0.0, 0.0, 0.0))
-    drive = drive_route(robot, Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0), ODOMETRY)
-    robot.move(1.0, 0.7)  # homing moved it on a little
-    retrace_route(robot, drive)
-    assert (robot.pose.x_m, robot.pose.y_m) == pytest.approx((0.0, 0.0), abs=1e-6)
+    reached: dict[int, tuple[float, float]] = {}
+
+    def at_waypoint(i: int) -> None:
+        reached[i] = (robot.pose.x_m, robot.pose.y_m)
+
+    route = Route(1, 3, (0.0, 0.0), ((1.0, 0.0), (1.0, 3.0)), 4.0)
+    drive_route(robot, route, ODOMETRY, at_waypoint)
+    assert list(reached) == [0, 1]
+    assert reached[0] == pytest.approx((1.0, 0.0)) and reached[1] == pytest.approx((1.0, 3.0))
+
+
+def test_a_way_back_that_no_recording_made_runs_through_its_points() -> None:
+    back = route_through((1.0, 3.0), [(1.0, 0.0), (0.0, 0.0)])
+    assert back.waypoints_xy_m == ((1.0, 0.0), (0.0, 0.0))
+    assert back.length_m == pytest.approx(4.0)

@@ -178,6 +178,7 @@ def test_twins_no_place_tells_apart_are_told_apart_by_a_recorded_route(driven):
     assert result.first.state is LocalizationState.AMBIGUOUS
     assert result.checks, "the twins are checked by driving their recorded routes"
     assert result.final.top[0] == "office_a" == robot.true_room()  # and it came back
+    assert all(check.back_room == "office_a" for check in result.checks if check.confirmed)
     assert result.final.state is LocalizationState.LOCALIZED
     assert result.distance_m >= sum(check.distance_m for check in result.checks)
 

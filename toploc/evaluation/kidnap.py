@@ -101,6 +101,7 @@ class Trial:
                     "confirmed": c.confirmed,
                     "end_inliers": c.end_inliers,
                     "end_homing_m": c.end_homing_m,
+                    "back_room": c.back_room,
                 }
                 for c in self.result.checks
             ],
