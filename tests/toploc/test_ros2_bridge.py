@@ -193,7 +193,12 @@ def test_a_subscriber_that_insists_on_the_attachment_decodes_every_belief(graph)
     def localized_everywhere() -> bool:
         with lock:
             last = [received[w][-1][1] if received[w] else None for w in topics]
-        return all(m is not None for m in last) and last[2].state == "localized"
+        if any(m is None for m in last):
+            return False
+        text, diag, typed, _pose = last
+        return json.loads(text.data)["state"] == typed.state == "localized" and (
+            diag.status[0].level == 0
+        )
 
     assert wait_for(localized_everywhere, 5), {k: len(v) for k, v in received.items()}
     (_, text), (_, diag), (attachment, typed), (_, pose) = (received[w][-1] for w in topics)

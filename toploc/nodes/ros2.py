@@ -203,20 +203,34 @@ class Ros2Bridge:
                 if current == self._published:
                     return False
                 self._published = current
-            self._put(current)
+            if not self._put(current):
+                with self._lock:
+                    self._published = None  # the next belief, even an equal one, tries again
         return True
 
-    def _put(self, current: dict[str, Any]) -> None:
+    def _put(self, current: dict[str, Any]) -> bool:
+        """Put ``current`` on every topic; whether every put went out. A topic whose put
+        fails (the session closing) is logged and does not keep the others from theirs."""
         types = self.types
-        self.belief_json.put(belief_string(types, current))
-        self.diagnostics.put(belief_diagnostics(types, current, self.robot_id))
-        self.belief.put(room_belief(types, current))
+        messages = [
+            (self.belief_json, belief_string(types, current)),
+            (self.diagnostics, belief_diagnostics(types, current, self.robot_id)),
+            (self.belief, room_belief(types, current)),
+        ]
         best = current.get("best_place") or {}
         if best.get("place_id") is not None:
             place = self._place(int(best["place_id"]))
             pose = None if place is None else place_pose(types, current, place)
             if pose is not None:
-                self.pose.put(pose)
+                messages.append((self.pose, pose))
+        sent = True
+        for publisher, message in messages:
+            try:
+                publisher.put(message)
+            except zenoh.ZError as error:
+                _log.warning("could not publish on %s: %s", publisher.full_name, error)
+                sent = False
+        return sent
 
     def _trigger(self, success: bool, message: str) -> Any:
         return self.types.message(f"{TRIGGER}_Response", success=success, message=message)
@@ -245,10 +259,11 @@ class Ros2Bridge:
         return self.types.message(f"{EMPTY}_Response", structure_needs_at_least_one_member=0)
 
     def close(self) -> None:
-        """Leave the ROS graph, then stop following toploc's bus."""
-        self.node.close()
+        """Stop following toploc's bus, then leave the ROS graph (in this order, so that no
+        belief arrives to be put on a publisher already undeclared)."""
         self.localizer.close()
         bus.undeclare_all(self._toploc_entities)
+        self.node.close()
 
     def __enter__(self) -> Self:
         return self
