@@ -332,9 +332,14 @@ class CalibrationSamples:
         twin test (``lookalike_fraction``): a room recorded at places a metre apart explains
         its own views better than the twin does (office_a 209 spread inliers, office_b 110 on a
         map recorded with three places per office, every other room at most 13), yet the twin
-        explains every one of them. Pairs the user ``declared`` are pairs whatever the
-        views say (rooms the map lacks left out). A pair's counts in each other's views are
-        never chance counts, however low (its places far from the view's spot).
+        explains every one of them. Rooms joined by one of ``edges`` are not paired by their
+        counts: each sees the other through the door, and on a map of two places per room the
+        one view by the door is half of its room's views (maps recorded on one drive paired
+        the house's hall with a bathroom and the building's corridor with an office: the
+        belief could not tell them apart, and no route check could end in them). Pairs the
+        user ``declared`` are pairs whatever the views say (rooms the map lacks left out). A
+        pair's counts in each other's views are never chance counts, however low (its places
+        far from the view's spot).
 
         One side is enough when another room **outdoes** the own room: in at least half of a
         room's queries (the room having another place to match), a room not joined to it by
@@ -397,7 +402,10 @@ class CalibrationSamples:
                     far_standout_fraction * own,
                 )
                 standing_out[(own_room, room)] += one_side and (near or far)
-                if counted or room in seen_alike:
+                # rooms joined by a door see each other through it: their counts pair them only
+                # by appearance (which leaves them out too) or when declared
+                through_door = frozenset((own_room, room)) in adjacent
+                if (counted and not through_door) or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only
         # the views near it (on the dense house, hall and living room against the bedrooms)

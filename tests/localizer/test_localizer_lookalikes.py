@@ -200,6 +200,28 @@ def test_a_room_seen_through_a_door_from_a_few_views_is_no_look_alike():
     assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
 
 
+def test_rooms_joined_by_a_door_that_see_each_other_in_half_their_views_are_no_look_alikes():
+    from localizer.likelihood import CalibrationSamples
+
+    # the bare house recorded on one drive, two places per room (world seed 17): one hall
+    # place stands by bathroom_a's door and one bathroom place looks out through it; each
+    # room finds the other in half of its views, as its twin would
+    sizes = {"hall": 2, "bathroom_a": 2, "bathroom_b": 2, "study": 2}
+    queries = [
+        ("hall", {"hall": 30.0, "bathroom_a": 28.0, "study": 1.0}),
+        ("hall", {"hall": 40.0, "bathroom_a": 2.0, "study": 1.0}),
+        ("bathroom_a", {"bathroom_a": 20.0, "hall": 25.0, "bathroom_b": 3.0}),
+        ("bathroom_a", {"bathroom_a": 20.0, "hall": 3.0, "bathroom_b": 15.0}),
+        ("bathroom_b", {"bathroom_b": 20.0, "bathroom_a": 17.0, "hall": 2.0}),
+        ("bathroom_b", {"bathroom_b": 22.0, "bathroom_a": 19.0, "study": 1.0}),
+    ]
+    edges = [("hall", "bathroom_a"), ("hall", "bathroom_b"), ("hall", "study")]
+    through_doors = CalibrationSamples.from_queries(queries, sizes, edges=edges)
+    assert through_doors.lookalike_pairs == (("bathroom_a", "bathroom_b"),)
+    without_doors = CalibrationSamples.from_queries(queries, sizes)
+    assert ("bathroom_a", "hall") in without_doors.lookalike_pairs
+
+
 def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_own_views():
     from localizer.likelihood import CalibrationSamples
 
