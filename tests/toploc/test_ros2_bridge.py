@@ -307,6 +307,32 @@ def test_the_bridge_follows_the_localizer_going_and_coming_back(graph):
         assert wait_for(lambda: "stale" not in (graph.bridge.last_published or {"stale": 1}), 5)
 
 
+def test_a_topic_whose_put_fails_does_not_keep_the_others_and_the_belief_is_put_again(graph):
+    assert wait_for(lambda: graph.bridge.last_published == graph.service.current, 5)
+    put: dict[str, list] = {"typed": []}
+    failing = {"fail": True}
+
+    def diagnostics_put(_message) -> None:
+        if failing["fail"]:
+            raise zenoh.ZError("Undeclared publisher")
+
+    graph.bridge.belief_json.put = lambda _message: None
+    graph.bridge.diagnostics.put = diagnostics_put
+    graph.bridge.belief.put = put["typed"].append
+    belief = make_belief({"office_a": 0.8, "office_b": 0.2}, stamp=5.0)
+
+    def typed_puts() -> int:  # the localizer's own publications may come in between
+        return sum(message.stamp.sec == 5 for message in put["typed"])
+
+    assert graph.bridge.publish(belief)
+    assert typed_puts() == 1  # the topic after the failing one was put too
+    assert graph.bridge.publish(belief)  # not taken as carried already: put again
+    assert typed_puts() == 2
+    failing["fail"] = False
+    assert graph.bridge.publish(belief)
+    assert typed_puts() == 3
+
+
 def test_a_router_that_goes_away_and_comes_back_is_rejoined(graph):
     graph.router.close()
     graph.router = router_session(graph.router_endpoint)
