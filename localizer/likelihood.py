@@ -386,12 +386,11 @@ class CalibrationSamples:
                 count = float(best.get(room, 0.0))
                 counted = count >= bar
                 by_count[(own_room, room)] += counted
+                # rooms joined by a door see each other through it: their counts pair them
+                # neither from one side nor mutually (appearance leaves them out too)
+                through_door = frozenset((own_room, room)) in adjacent
                 # one side may pair only a view its own room verified, from beyond a wall
-                one_side = (
-                    own > 0
-                    and room_sizes.get(own_room, 0) >= 2
-                    and frozenset((own_room, room)) not in adjacent
-                )
+                one_side = own > 0 and room_sizes.get(own_room, 0) >= 2 and not through_door
                 outdone[(own_room, room)] += one_side and counted and count >= own
                 near = count >= max(
                     standout_min_inliers, standout_factor * others_max, standout_fraction * own
@@ -402,9 +401,6 @@ class CalibrationSamples:
                     far_standout_fraction * own,
                 )
                 standing_out[(own_room, room)] += one_side and (near or far)
-                # rooms joined by a door see each other through it: their counts pair them only
-                # by appearance (which leaves them out too) or when declared
-                through_door = frozenset((own_room, room)) in adjacent
                 if (counted and not through_door) or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only
