@@ -85,12 +85,20 @@ def alike_by_appearance(
     other room 9–26 matches), the bare house's twin bathrooms at 44 and 54 matches and 5
     (others 6–19 matches). A room seen through a door or an opening is matched and verified
     alike (the dense house's living room on a bedroom's places: 124–165 matches, 70–87 %
-    verified) and is left to the inlier counts. Thresholds: :data:`APPEARANCE_MIN_MATCHES`,
+    verified) and is left to the inlier counts. When the view's room has no other place, the
+    best-matching room stands in for its own: a room that shares a few objects with the twins
+    is not their twin (a building recorded with one place per room, world seed 21: office_b's
+    view matched office_a at 98 and the kitchen at 42, every other room at 7–18; paired with
+    office_b, the kitchen joined the offices' aliased group and all 20 kidnappings into the
+    offices ended ambiguous between the three). Thresholds: :data:`APPEARANCE_MIN_MATCHES`,
     :data:`APPEARANCE_OWN_FRACTION`, :data:`APPEARANCE_CHANCE_FACTOR`,
     :data:`APPEARANCE_MAX_VERIFIED`."""
     adjacent = {frozenset(edge) for edge in edges}
-    own = float(matches.get(own_room, (0, 0))[0]) if room_sizes.get(own_room, 0) >= 2 else 0.0
     rooms = [r for r in room_sizes if r != own_room]
+    if room_sizes.get(own_room, 0) >= 2:
+        own = float(matches.get(own_room, (0, 0))[0])
+    else:  # no other place of its own: the room that matches the view best stands in for it
+        own = max((float(matches.get(r, (0, 0))[0]) for r in rooms), default=0.0)
     alike = set()
     chances = medians_without_each([float(matches.get(r, (0, 0))[0]) for r in rooms])
     for room, chance in zip(rooms, chances, strict=True):

@@ -338,12 +338,14 @@ def test_rooms_alike_by_appearance_in_half_the_views_each_are_look_alikes():
 def test_each_look_alike_pair_says_which_test_found_it():
     from localizer.likelihood import CalibrationSamples
 
-    # offices found by appearance only (one place each, few inliers); bedrooms by their counts
-    # (each explains the other's views far above chance); bathrooms named by the user
-    sizes = {"office_a": 1, "office_b": 1, "bed_1": 2, "bed_2": 2, "bath_1": 2, "bath_2": 2}
+    # offices found by appearance only (one place each, few inliers, the kitchen near them);
+    # bedrooms by their counts (each explains the other's views far above chance); bathrooms
+    # named by the user
+    sizes = dict.fromkeys(["office_a", "office_b", "kitchen"], 1)
+    sizes |= dict.fromkeys(["bed_1", "bed_2", "bath_1", "bath_2"], 2)
     queries = [
-        ("office_a", {"office_b": 6.0}),
-        ("office_b", {"office_a": 5.0}),
+        ("office_a", {"office_b": 6.0, "kitchen": 4.0}),
+        ("office_b", {"office_a": 5.0, "kitchen": 4.0}),
         ("bed_1", {"bed_1": 30.0, "bed_2": 25.0}),
         ("bed_2", {"bed_2": 28.0, "bed_1": 24.0}),
         ("bath_1", {"bath_1": 30.0}),
@@ -395,8 +397,11 @@ def test_a_room_seen_through_a_door_that_outdoes_the_own_room_is_no_look_alike()
 def test_a_room_found_alike_from_one_side_only_is_no_look_alike():
     from localizer.likelihood import CalibrationSamples
 
-    sizes = {"office_a": 1, "office_b": 1}
-    queries = [("office_a", {"office_b": 6.0}), ("office_b", {"office_a": 5.0})]
+    sizes = {"office_a": 1, "office_b": 1, "kitchen": 1}
+    queries = [
+        ("office_a", {"office_b": 6.0, "kitchen": 4.0}),
+        ("office_b", {"office_a": 5.0, "kitchen": 4.0}),
+    ]
     samples = CalibrationSamples.from_queries(queries, sizes, alike=[{"office_b"}, set()])
     assert samples.lookalike_pairs == ()
 
@@ -408,6 +413,19 @@ def test_a_twin_matched_often_and_verified_little_looks_alike():
     matches = {"office_b": (99, 30), "storage": (26, 3), "corridor": (22, 2), "kitchen": (19, 1)}
     sizes = {"office_a": 1, "office_b": 1, "storage": 1, "corridor": 1, "kitchen": 1}
     assert alike_by_appearance("office_a", matches, sizes) == {"office_b"}
+
+
+def test_a_room_sharing_a_few_objects_with_a_twin_of_one_place_does_not_look_alike():
+    from localizer.lookalikes import alike_by_appearance
+
+    # office_b's view, one place per room: its twin matches it at 98, the kitchen (a few of the
+    # same pictures on its walls) at 42, far above every other room, yet far below the twin
+    matches = {"office_a": (98, 46), "kitchen": (42, 7), "corridor": (18, 5), "seminar": (9, 0)}
+    matches |= {"storage": (7, 0)}
+    sizes = dict.fromkeys(["office_a", "office_b", "kitchen", "corridor", "seminar", "storage"], 1)
+    assert alike_by_appearance("office_b", matches, sizes) == {"office_a"}
+    alone = {room: counts for room, counts in matches.items() if room != "office_a"}
+    assert alike_by_appearance("office_b", alone, sizes) == {"kitchen"}
 
 
 def test_a_room_seen_through_an_opening_is_matched_and_verified_so_it_does_not_look_alike():
@@ -494,3 +512,40 @@ def test_a_room_standing_out_in_fewer_than_half_of_a_rooms_views_is_no_look_alik
 
     only_a = [(room, counts) for room, counts in BEDROOMS if room == "bedroom_a"]
     assert CalibrationSamples.from_queries(only_a, HOUSE).lookalike_pairs == ()
+
+
+# a house recorded on one drive, one place per room (world seed 19): each bedroom's view finds
+# the other far above every other room, below the mutual count test's 8 spread inliers once
+ONE_PLACE_BEDROOMS = [
+    ("bedroom_a", {"bedroom_b": 12.7, "hall": 0.9, "study": 0.8, "living": 0.2}),
+    ("bedroom_b", {"bedroom_a": 7.95, "study": 0.9, "living": 0.7, "hall": 0.6}),
+    ("hall", {"bedroom_a": 0.5, "bedroom_b": 0.6, "study": 0.2, "living": 0.8}),
+]
+ONE_PLACE_HOUSE = dict.fromkeys(["bedroom_a", "bedroom_b", "hall", "living", "study"], 1)
+
+
+def test_rooms_of_one_place_that_stand_out_in_each_others_views_are_look_alikes():
+    from localizer.likelihood import CalibrationSamples
+
+    samples = CalibrationSamples.from_queries(ONE_PLACE_BEDROOMS, ONE_PLACE_HOUSE)
+    assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
+    assert samples.pair_tests == ("standout",)
+
+
+def test_a_room_of_one_place_standing_out_from_one_side_only_is_no_look_alike():
+    from localizer.likelihood import CalibrationSamples
+
+    # bedroom_b's view finds bedroom_a at chance level: perhaps a window, not a twin
+    one_side = [
+        (room, counts | {"bedroom_a": 0.7}) if room == "bedroom_b" else (room, counts)
+        for room, counts in ONE_PLACE_BEDROOMS
+    ]
+    assert CalibrationSamples.from_queries(one_side, ONE_PLACE_HOUSE).lookalike_pairs == ()
+
+
+def test_rooms_of_one_place_joined_by_a_door_never_stand_out_as_look_alikes():
+    from localizer.likelihood import CalibrationSamples
+
+    door = [("bedroom_a", "bedroom_b")]
+    samples = CalibrationSamples.from_queries(ONE_PLACE_BEDROOMS, ONE_PLACE_HOUSE, edges=door)
+    assert samples.lookalike_pairs == ()
