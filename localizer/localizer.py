@@ -41,6 +41,16 @@ from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place, Pla
 # (benchmarks/bench_real_resolution.py); below it there is little to leave out.
 INDEX_MIN_PLACES = 20
 
+HOMED_ONE_PLACE_RATIO = 3.0
+"""A frame taken where the robot homed to the one place of a room without a known look-alike
+favours that room over the next by at most this ratio. Homing arrives wherever the view looks
+like the place: in its room, or in a twin the calibration could not find, one place per room
+giving it nothing to compare (a house recorded one place per room, world seed 21: the twin
+bedrooms' places verified each other at 4–5 spread inliers, as chance does; two robots in
+bedroom_b homed to bedroom_a's place and the frame there said bedroom_a, 0.998). The room is
+then checked by a recorded route (:mod:`localizer.active`), which a twin's different door
+tells apart."""
+
 
 @dataclass(frozen=True)
 class LocalizerConfig:
@@ -272,6 +282,9 @@ class Localizer:
         """One frame's likelihood per room (order of the map's rooms, sums to 1); look-alike
         rooms the map's calibration found are read on counterparts, or weighed as equally
         likely where the frame has none (:mod:`localizer.lookalikes`)."""
+        return self._one_viewpoint(self._frame_likelihood(observation), observation.at_place)
+
+    def _frame_likelihood(self, observation: Observation) -> np.ndarray:
         model, evidence = self.likelihood, observation.evidence.places
         if not self.lookalike_groups or not isinstance(model, RatioLikelihood):
             return room_likelihood(evidence, self.map.rooms, model)
@@ -286,6 +299,27 @@ class Localizer:
         )
         compared = [group for group in self.lookalike_groups if group not in aliased]
         return model.from_counts(counts, aliased, compared)
+
+    def alone(self, room: str) -> bool:
+        """Whether ``room`` has one place and no known look-alike: a frame at that place, homed
+        to, may come from a twin the map does not know (:data:`HOMED_ONE_PLACE_RATIO`)."""
+        return self.map.places_per_room[room] < 2 and not self.lookalikes.get(room)
+
+    def _one_viewpoint(self, likelihood: np.ndarray, at_place: int | None) -> np.ndarray:
+        """``likelihood`` with the room of ``at_place`` (the place homed to) held to
+        :data:`HOMED_ONE_PLACE_RATIO` times the next room when it is :meth:`alone`."""
+        if at_place is None or len(likelihood) < 2:
+            return likelihood
+        room = self.map.place(at_place).room
+        if not self.alone(room):
+            return likelihood
+        i = self.map.rooms.index(room)
+        cap = HOMED_ONE_PLACE_RATIO * float(np.delete(likelihood, i).max())
+        if not 0.0 < cap < likelihood[i]:
+            return likelihood
+        held = likelihood.copy()
+        held[i] = cap
+        return held / held.sum()
 
     def same_spot_places(self, place_id: int) -> tuple[int, ...]:
         """The counterparts of ``place_id`` that stand on its spot: they verify each other on

@@ -178,3 +178,28 @@ def test_a_room_of_two_places_is_localized_whatever_the_coverage():
     localizer.reset({"cellar": 100.0, "attic": 1.0})
     localizer.latest = frame_seeing(localizer, 2, "cellar", 0.3)
     assert localizer.belief().state is LocalizationState.LOCALIZED
+
+
+def test_a_frame_where_the_robot_homed_to_a_rooms_one_place_favours_it_by_at_most_the_cap():
+    from dataclasses import replace as with_field
+
+    from localizer.localizer import HOMED_ONE_PLACE_RATIO
+
+    localizer = Localizer(one_and_two_place_map())
+    frame = frame_seeing(localizer, 1, "attic", 0.9)
+    seen = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
+    homed = with_field(frame, at_place=1)
+    held = dict(zip(localizer.map.rooms, localizer.frame_likelihood(homed), strict=True))
+    assert seen["attic"] > HOMED_ONE_PLACE_RATIO * seen["cellar"]  # 60 inliers: far more
+    assert held["attic"] == pytest.approx(HOMED_ONE_PLACE_RATIO * held["cellar"])
+
+
+def test_a_frame_where_the_robot_homed_to_a_place_of_a_room_of_two_is_read_in_full():
+    from dataclasses import replace as with_field
+
+    localizer = Localizer(one_and_two_place_map())
+    frame = frame_seeing(localizer, 2, "cellar", 0.9)
+    np.testing.assert_allclose(
+        localizer.frame_likelihood(with_field(frame, at_place=2)),
+        localizer.frame_likelihood(frame),
+    )

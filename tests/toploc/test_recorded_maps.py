@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -204,3 +205,36 @@ def test_map_info_says_recorded_drives_tell_the_twins_apart(driven):
         result.output
     )
     assert "same two spots" not in result.output
+
+
+@pytest.fixture(scope="module")
+def one_place_twins_unknown(tmp_path_factory):
+    """The corridor and twin offices, one place each, recorded on one drive (seed 3), loaded as
+    if the calibration had not found the twins (one place each gives it little to compare:
+    a recorded house's bedrooms verified each other at 4-5 spread inliers, as chance does)."""
+    db = tmp_path_factory.mktemp("one_place") / "map.db"
+    record_map(make_world("building"), 1, 3, db, rooms=ROOMS, camera=CAMERA, drive=True)
+    loaded = load_map(db)
+    assert loaded.likelihood is not None
+    unknown = replace(loaded.likelihood, lookalikes=(), counterparts=())
+    return replace(loaded, likelihood=unknown)
+
+
+def test_a_room_of_one_place_is_checked_by_a_route_before_the_robot_is_sure_of_it(
+    one_place_twins_unknown,
+):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_b", seed=2, camera=CAMERA)
+    result = localize_actively(Localizer(one_place_twins_unknown), robot)
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert result.final.top[0] == "office_b" == robot.true_room()
+    assert [(check.room, check.confirmed) for check in result.checks] == [("office_b", True)]
+
+
+def test_a_robot_in_a_twin_the_map_does_not_know_is_not_sure_once_the_check_misses(
+    one_place_twins_unknown,
+):
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=4, camera=CAMERA)
+    result = localize_actively(Localizer(one_place_twins_unknown), robot)
+    assert result.first.top[0] == "office_b"  # its place nearer the robot, in its own frame
+    assert [(check.room, check.confirmed) for check in result.checks] == [("office_b", False)]
+    assert result.final.state is not LocalizationState.LOCALIZED
