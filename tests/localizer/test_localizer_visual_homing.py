@@ -89,14 +89,14 @@ def test_step_with_known_rotation_points_within_90_deg_of_home(variant):
 
 def test_best_step_with_unknown_rotation_points_within_90_deg_of_home():
     for world, home, here in _cases(8):
-        step = home_step(world.fingerprint(here), world.fingerprint(home))
+        step = home_step(world.fingerprint(here), world.fingerprint(home), StepParams("best"))
         assert _angle_error_deg(step.direction_rad, _true_direction_rad(here, home)) < 90.0
 
 
 def test_best_step_recovers_a_pure_rotation():
     for world, home, here in _cases(11, count=10):
         turned = Pose2D(home.x_m, home.y_m, here.heading_rad)
-        step = home_step(world.fingerprint(turned), world.fingerprint(home))
+        step = home_step(world.fingerprint(turned), world.fingerprint(home), StepParams("best"))
         assert step.shift_rad == pytest.approx(_rotation_rad(home, turned), abs=1e-9)
         assert step.length < 1e-9
 
@@ -319,3 +319,10 @@ def test_pose_direction_without_geometry_is_the_matched_direction():
     assert direction == pytest.approx(1.2)
     nothing = signed_pose_direction_rad(Verification.none(), math.nan, np.ones(2), np.ones(2), 0)
     assert math.isnan(nothing)
+
+
+def test_the_closed_loop_homes_as_eval_homings_best_does_by_default():
+    from toploc.evaluation.homing import BEST_METHOD
+
+    assert StepParams().variant == "pose"  # the verified axis, signed by vote
+    assert BEST_METHOD == "pose-vote"
