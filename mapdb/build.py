@@ -223,8 +223,8 @@ def _extract_parallel(
                     submit_next()
                     try:
                         result: list[Fingerprint] | Exception = future.result()
-                    except BrokenProcessPool:
-                        raise
+                    except BrokenProcessPool as error:
+                        raise pool.named(error) from error
                     except Exception as error:  # raised by extract in the worker
                         result = error
                     yield job, result

@@ -159,6 +159,19 @@ class WorkerPool(ProcessPoolExecutor):
                 stop_workers(self)
                 raise WorkerDiedError(pid, exitcode)
 
+    def named(self, error: BrokenProcessPool) -> BrokenProcessPool:
+        """``error`` as a :class:`WorkerDiedError` naming the worker that ended, when the pool
+        noticed it first and said only "A child process terminated abruptly" (which of the two
+        notices first is a race); ``error`` itself if it names one already or none has ended.
+        The pool terminates the other workers once it finds one ended: a worker not ended by
+        ``SIGTERM`` is the one that died."""
+        if isinstance(error, WorkerDiedError):
+            return error
+        processes = dict(getattr(self, "_processes", None) or {})
+        ended = [(pid, p.exitcode) for pid, p in processes.items() if p.exitcode is not None]
+        died = [(pid, code) for pid, code in ended if code != -signal.SIGTERM] or ended
+        return WorkerDiedError(*died[0]) if died else error
+
     def __exit__(
         self,
         exc_type: type[BaseException] | None,

@@ -192,3 +192,21 @@ def test_a_worker_killed_while_sending_a_result_is_named_instead_of_awaited_for_
 )
 def test_how_a_worker_ended_is_said_in_words(exitcode: int, words: str) -> None:
     assert describe_exit(exitcode) == words
+
+
+def test_a_pool_that_noticed_a_dead_worker_first_still_names_it():
+    from concurrent.futures.process import BrokenProcessPool
+
+    from mapdb.workers import WorkerDiedError, spawn_process_pool, stop_workers
+
+    pool = spawn_process_pool(1)
+    try:
+        worker_pid = pool.submit(os.getpid).result(timeout=60)
+        (process,) = dict(pool._processes).values()
+        process.kill()
+        process.join(timeout=10)
+        named = pool.named(BrokenProcessPool("A child process terminated abruptly"))
+    finally:
+        stop_workers(pool)
+    assert isinstance(named, WorkerDiedError)
+    assert named.pid == worker_pid and "SIGKILL" in str(named)
