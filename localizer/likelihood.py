@@ -408,8 +408,9 @@ class CalibrationSamples:
                     far_standout_factor * others_max,
                     far_standout_fraction * own,
                 )
-                standing_out[(own_room, room)] += one_side and (near or far)
-                both_ways[(own_room, room)] += not through_door and (near or far)
+                stands = not through_door and (near or far)
+                standing_out[(own_room, room)] += one_side and stands
+                both_ways[(own_room, room)] += stands
                 if (counted and not through_door) or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only

@@ -153,11 +153,9 @@ class WorkerPool(ProcessPoolExecutor):
         replacement and none retires after some tasks), so an ended worker means one died, and
         the pool may never say so itself (a result half sent, see :func:`stop_workers`).
         """
-        for pid, process in dict(getattr(self, "_processes", None) or {}).items():
-            exitcode = process.exitcode
-            if exitcode is not None:
-                stop_workers(self)
-                raise WorkerDiedError(pid, exitcode)
+        for pid, exitcode in self._ended():
+            stop_workers(self)
+            raise WorkerDiedError(pid, exitcode)
 
     def named(self, error: BrokenProcessPool) -> BrokenProcessPool:
         """``error`` as a :class:`WorkerDiedError` naming the worker that ended, when the pool
@@ -167,10 +165,15 @@ class WorkerPool(ProcessPoolExecutor):
         ``SIGTERM`` is the one that died."""
         if isinstance(error, WorkerDiedError):
             return error
-        processes = dict(getattr(self, "_processes", None) or {})
-        ended = [(pid, p.exitcode) for pid, p in processes.items() if p.exitcode is not None]
+        ended = self._ended()
         died = [(pid, code) for pid, code in ended if code != -signal.SIGTERM] or ended
         return WorkerDiedError(*died[0]) if died else error
+
+    def _ended(self) -> list[tuple[int, int]]:
+        """The (pid, exit code) of each worker that has ended."""
+        processes = dict(getattr(self, "_processes", None) or {})
+        ended = ((pid, process.exitcode) for pid, process in processes.items())
+        return [(pid, code) for pid, code in ended if code is not None]
 
     def __exit__(
         self,
