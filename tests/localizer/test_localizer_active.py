@@ -10,7 +10,7 @@ from localizer.active import CANCELLED, ENDINGS, ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
-from localizer.visual_homing import HomingResult
+from localizer.visual_homing import HomingResult, drive_home
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -86,15 +86,19 @@ def test_a_robot_woken_facing_nothing_finds_its_room_a_step_away(localizer):
 
 
 class StepAwayRobot:
-    """A simulated robot whose camera is covered until it first moves (woken facing a wall)."""
+    """A simulated robot whose camera is covered until it first moves (woken facing a wall),
+    all but its first ``open_columns`` columns (a narrow view of the room)."""
 
-    def __init__(self, robot: SimulatedRobot) -> None:
-        self.robot, self.moved = robot, False
+    def __init__(self, robot: SimulatedRobot, open_columns: int = 0) -> None:
+        self.robot, self.moved, self.open_columns = robot, False, open_columns
 
     def capture(self) -> Capture:
+        seen = self.robot.capture()
         if self.moved:
-            return self.robot.capture()
-        return Capture(np.full((96, 512, 3), 128, np.uint8), 0.0, "covered")
+            return seen
+        image = seen.image.copy()
+        image[:, self.open_columns :] = 128
+        return Capture(image, seen.stamp_s, "covered")
 
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         self.moved = True
@@ -105,6 +109,42 @@ class StepAwayRobot:
 
     def stop(self) -> None:
         self.robot.stop()
+
+
+def test_a_lost_robot_that_faintly_sees_a_place_homes_to_it_and_looks_again(localizer):
+    robot = StepAwayRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "kitchen", seed=1, camera=CAMERA),
+        open_columns=128,
+    )
+    first_look = localizer.observe(robot.capture().image).evidence.places
+    faint = max(first_look, key=lambda item: item.spread_inliers)
+    asked = []
+
+    def home(place_id: int) -> HomingResult:
+        asked.append(place_id)
+        return drive_home(robot, localizer.map.fingerprint(place_id), localizer.extract)
+
+    result = localize_actively(localizer, robot, "separating", home=home)
+    assert result.first.state is LocalizationState.LOST
+    assert asked[0] == faint.place_id and faint.room == "kitchen"
+    assert result.looks_elsewhere == 1
+    assert result.final.top[0] == "kitchen" and result.final.state is not LocalizationState.LOST
+
+
+def test_a_lost_robot_whose_homing_drives_nowhere_steps_away_instead(localizer):
+    robot = StepAwayRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "kitchen", seed=1, camera=CAMERA),
+        open_columns=128,
+    )
+
+    def stay(place_id: int) -> HomingResult:
+        last = localizer.extract(robot.capture().image)
+        return HomingResult(True, 0, 0.0, "arrived", last)
+
+    result = localize_actively(localizer, robot, "separating", home=stay)
+    assert result.first.state is LocalizationState.LOST
+    assert robot.moved, "a homing that drove nowhere gives no new view: the robot steps away"
+    assert result.final.top[0] == "kitchen"
 
 
 def test_active_params_refuse_a_negative_budget():

@@ -13,6 +13,7 @@ import pytest
 from localizer.active import localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import Localizer
+from localizer.visual_homing import HomingResult
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -238,3 +239,29 @@ def test_a_robot_in_a_twin_the_map_does_not_know_is_not_sure_once_the_check_miss
     assert result.first.top[0] == "office_b"  # its place nearer the robot, in its own frame
     assert [(check.room, check.confirmed) for check in result.checks] == [("office_b", False)]
     assert result.final.state is not LocalizationState.LOCALIZED
+
+
+def test_checks_of_one_room_that_all_miss_count_once_and_leave_the_twins_even(driven):
+    """A robot in office_a whose every route ends short of the route's end place (a door its
+    homing does not pass): the misses come from one cause, not from chance each time."""
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
+    localizer = Localizer(load_map(driven[0]))
+
+    def home(place_id: int) -> HomingResult:
+        stored = localizer.map.fingerprint(place_id)
+        if localizer.map.place(place_id).room == "corridor":  # a route's end: never reached
+            return HomingResult(False, 1, 0.5, "converged", stored)
+        return HomingResult(True, 1, 0.5, "arrived", stored)  # its room's places: at once
+
+    result = localize_actively(localizer, robot, home=home)
+    assert abs(odds(result.first, "office_a", "office_b") - 1.0) < 0.01  # the twins: even
+    misses = [(check.room, check.confirmed) for check in result.checks]
+    assert misses.count(("office_a", False)) >= 2 and ("office_b", False) in misses
+    # one miss of each twin, each folded in once: even again (0.82 for office_b when each
+    # miss of office_a was folded in)
+    assert abs(odds(result.final, "office_a", "office_b") - 1.0) < 0.05
+
+
+def odds(belief, room: str, other: str) -> float:
+    probability = dict(zip(belief.rooms, belief.probabilities, strict=True))
+    return probability[room] / probability[other]
