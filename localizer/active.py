@@ -123,10 +123,10 @@ class ActiveParams:
                 "need 0 < route_false_rate < route_hit_rate < 1, got "
                 f"{self.route_false_rate} and {self.route_hit_rate}"
             )
-        if self.max_targets < 0 or self.lost_looks < 0:
+        if self.max_targets < 0 or self.lost_looks < 0 or self.lost_home_min_inliers < 1:
             raise ValueError(
-                f"max_targets and lost_looks must be >= 0, got {self.max_targets}, "
-                f"{self.lost_looks}"
+                "max_targets and lost_looks must be >= 0 and lost_home_min_inliers >= 1, got "
+                f"{self.max_targets}, {self.lost_looks}, {self.lost_home_min_inliers}"
             )
         if not (math.isfinite(self.lost_turn_deg) and math.isfinite(self.lost_step_m)):
             raise ValueError("lost_turn_deg and lost_step_m must be finite")
@@ -155,8 +155,8 @@ class RouteCheck:
     ``end_homing_m``: how far the homing to ``end`` drove (0: the route was not driven);
     ``back_room``: the room whose place the robot came back to at once (``room``, through the
     views it took on the way out, or ``room``'s look-alike by a recorded route from ``end``),
-    where the check was folded into the belief; None: it did not, and the belief started
-    afresh or was kept."""
+    where the check was folded into the belief (a miss only if it was the room's first, see
+    :func:`_check_route`); None: it did not, and the belief started afresh or was kept."""
 
     room: str
     start: int

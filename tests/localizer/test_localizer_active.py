@@ -152,6 +152,11 @@ def test_active_params_refuse_a_negative_budget():
         ActiveParams(lost_looks=-1)
 
 
+def test_active_params_refuse_homing_a_lost_robot_to_a_place_it_matched_nothing_with():
+    with pytest.raises(ValueError, match="lost_home_min_inliers >= 1"):
+        ActiveParams(lost_home_min_inliers=0)
+
+
 def test_no_targets_allowed_means_no_drive(localizer):
     robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=2, camera=CAMERA)
     result = localize_actively(localizer, robot, "most-likely", ActiveParams(max_targets=0))
