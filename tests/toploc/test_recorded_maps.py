@@ -263,5 +263,5 @@ def test_checks_of_one_room_that_all_miss_count_once_and_leave_the_twins_even(dr
 
 
 def odds(belief, room: str, other: str) -> float:
-    probability = dict(zip(belief.rooms, belief.probabilities, strict=True))
+    probability = belief.as_dict()
     return probability[room] / probability[other]
