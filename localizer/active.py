@@ -155,8 +155,9 @@ class RouteCheck:
     ``end_homing_m``: how far the homing to ``end`` drove (0: the route was not driven);
     ``back_room``: the room whose place the robot came back to at once (``room``, through the
     views it took on the way out, or ``room``'s look-alike by a recorded route from ``end``),
-    where the check was folded into the belief (a miss only if it was the room's first, see
-    :func:`_check_route`); None: it did not, and the belief started afresh or was kept."""
+    where the check was folded into the belief (unless an earlier check of the room came out
+    the same, see :func:`_check_route`); None: it did not, and the belief started afresh or
+    was kept."""
 
     room: str
     start: int
@@ -286,16 +287,16 @@ def localize_actively(
         twins = _top_two_alike(belief, localizer.lookalikes)
         unsure = (target is None or twins) and _may_drive(belief, len(visits), params.max_targets)
         if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
-            missed = Counter(done.room for done in checks if not done.confirmed)
-            check = _route_to_check(localizer, belief, observation, tried_routes, missed, params)
+            checked = Counter(done.room for done in checks)
+            check = _route_to_check(localizer, belief, observation, tried_routes, checked, params)
         if check is not None:
             start, route = check
             tried_routes.add(start.id)
             rival = _likely_twin(belief, start.room, localizer.lookalikes)
             notify(localizer.belief(LocalizationState.HOMING))
-            missed_before = any(_folded_miss(done, start.room) for done in checks)
+            told = frozenset(done.confirmed for done in checks if _told(done, start.room))
             done, captured, homing, observation = _check_route(
-                localizer, robot, go, start, route, rival, params, missed_before
+                localizer, robot, go, start, route, rival, params, told
             )
             distance += done.distance_m
             frames += captured
@@ -393,9 +394,10 @@ def _faintly_seen(observation: Observation, min_inliers: int, tried: set[int]) -
     return max(seen, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
 
 
-def _folded_miss(check: RouteCheck, room: str) -> bool:
-    """``check`` checked ``room``, did not arrive, and was folded into the belief."""
-    return check.room == room and not check.confirmed and check.back_room == room
+def _told(check: RouteCheck, room: str) -> bool:
+    """Whether ``check`` checked ``room`` and came back to where it began: its outcome
+    (:attr:`RouteCheck.confirmed`) told about ``room``, folded in or already known."""
+    return check.room == room and check.back_room == room
 
 
 def _may_drive(belief: RoomBelief, drives: int, max_targets: int) -> bool:
@@ -407,12 +409,12 @@ def _route_to_check(
     belief: RoomBelief,
     observation: Observation,
     tried: set[int],
-    missed: Mapping[str, int],
+    checked: Mapping[str, int],
     params: ActiveParams,
 ) -> tuple[Place, Route] | None:
     """A place to check a likely room from, and its recorded route out of the room to a room
     that has no look-alike. The likely rooms are taken in :func:`rooms_to_check`'s order
-    (``missed``: checks per room that did not arrive); in each, the places with a route
+    (``checked``: checks per room so far); in each, the places with a route
     and a heading, not tried yet, from the one the latest frame matched best. None if there
     is none."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
@@ -421,7 +423,7 @@ def _route_to_check(
     # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
     # bathroom_a and bedroom_a: a route between the two ends alike in both)
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
-    for room in rooms_to_check(belief, missed):
+    for room in rooms_to_check(belief, checked):
         leave_room = leave | {room}
         starts = [
             place
@@ -438,16 +440,20 @@ def _route_to_check(
     return None
 
 
-def rooms_to_check(belief: RoomBelief, missed: Mapping[str, int]) -> list[str]:
+def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
     """The likely rooms (at least :data:`LIKELY_SHARE` of the top room's probability) in the
-    order to check them by a route: the rooms with fewer checks that did not arrive
-    (``missed``, by room) first, then the more likely. A check that does not arrive is not
-    counted against its room, so without this the top room is checked again from its next
-    place; its rival's check tells more: it arrives if the robot is there (on world seed 14,
-    each of the 10 robots in office_b spent its first two of four drives on office_a's routes)."""
+    order to check them by a route: the rooms checked fewer times (``checked``, by room) first,
+    then the more likely. A room's checks share their end place and its view, and fail or pass
+    together: a check that arrived is followed by its rival's, not by the same room's again
+    (world seed 27's house, two places per room: the twin bedrooms open onto one hall whose
+    doors repeat every 6.6 m, and a robot in bedroom_b drove bedroom_a's two routes to the same
+    hall place, arrived both times and ended sure of bedroom_a, 0.985, in 4 of 5 kidnappings;
+    bedroom_b's own route arrives there too, and the two checks cancel). Likewise after a
+    check that did not arrive (on world seed 14, each of the 10 robots in office_b spent its
+    first two of four drives on office_a's routes)."""
     top_p = belief.top[1]
     likely = [(room, p) for room, p in belief.ranked() if p >= LIKELY_SHARE * top_p]
-    return [room for room, _ in sorted(likely, key=lambda rp: missed.get(rp[0], 0))]
+    return [room for room, _ in sorted(likely, key=lambda rp: checked.get(rp[0], 0))]
 
 
 def _frame_by_view(
@@ -473,15 +479,18 @@ def _check_route(
     route: Route,
     rival: str | None,
     params: ActiveParams,
-    missed_before: bool = False,
+    told: frozenset[bool] = frozenset(),
 ) -> tuple[RouteCheck, int, HomingResult, Observation]:
     """Check ``start``'s room by ``route`` (see :class:`RouteCheck`), fold the result into the
-    localizer's belief, and look again once back. A check that does not arrive is folded in
-    only if no earlier check of the room was (``missed_before``): the checks of one room fail
-    together (a door its homing does not pass, odometry that drifts the same way on the same
-    leg), and two misses taken as independent made a robot in the room sure of its twin (world
-    seed 25's house, two places per room: two checks of the bedroom the robot was in failed,
-    0.54 for it became 0.034). The way back: if homing to the route's end
+    localizer's belief, and look again once back. The result is folded in only if no earlier
+    check of the room came out the same (``told``: the outcomes, arrived or not, of the
+    earlier checks of the room that came back): the checks of one room fail or pass together
+    (a door its homing does not pass, odometry that drifts the same way on the same leg, an
+    end place whose view repeats where the twin's route ends). Two misses taken as independent
+    made a robot in the room sure of its twin (world seed 25's house, two places per room: two
+    checks of the bedroom the robot was in failed, 0.54 for it became 0.034); two arrivals
+    made a robot sure of the twin it was not in (world seed 27's house, see
+    :func:`rooms_to_check`). The way back: if homing to the route's end
     place arrived but not at once, by a recorded route from there into ``rival`` (``start``'s
     likely look-alike, if any); otherwise back along the views taken on the way out, to
     ``start``. Returns the check, the frames captured, the homing to the route's end place and
@@ -545,7 +554,7 @@ def _check_route(
             homed_to = start.id if back.arrived else None
             if _at_once(back, route, params):  # back where it began: it tells about this room
                 back_room = start.room
-                if confirmed or not missed_before:
+                if confirmed not in told:
                     ratio = _route_ratio(params) if confirmed else _miss_ratio(params)
                     localizer.update_rooms({start.room: ratio})
             elif not back.arrived:  # not back: it may be in any room now, the look decides

@@ -257,7 +257,7 @@ def test_active_params_refuse_route_rates_that_tell_nothing():
         ActiveParams(route_hit_rate=0.5, route_false_rate=0.5)
 
 
-def test_a_room_whose_check_did_not_arrive_is_checked_after_its_rival(localizer):
+def test_a_room_checked_once_is_checked_after_its_rival_whatever_came_out(localizer):
     localizer.reset()
     belief = localizer.update_rooms({"office_a": 30.0, "office_b": 20.0})
     assert rooms_to_check(belief, {}) == ["office_a", "office_b"]

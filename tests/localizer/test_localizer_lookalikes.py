@@ -415,6 +415,31 @@ def test_a_twin_matched_often_and_verified_little_looks_alike():
     assert alike_by_appearance("office_a", matches, sizes) == {"office_b"}
 
 
+def test_a_bare_twin_of_one_place_looks_alike_at_twice_what_other_rooms_match():
+    from localizer.lookalikes import alike_by_appearance
+
+    # bathroom_b's view on a bare house recorded with one place per room (world seed 26): its
+    # twin matches it best, at 40 (7 verified); the other rooms match it at 7-19 by chance
+    matches = {"bathroom_a": (40, 7), "bedroom_a": (11, 6), "bedroom_b": (16, 6), "hall": (7, 0)}
+    matches |= {"kitchen": (17, 6), "living": (19, 7), "study": (17, 9)}
+    sizes = dict.fromkeys([*matches, "bathroom_b"], 1)
+    edges = [("hall", "bathroom_b")]
+    assert alike_by_appearance("bathroom_b", matches, sizes, edges) == {"bathroom_a"}
+
+
+def test_a_room_sharing_a_wallpaper_with_a_twin_needs_more_than_twice_the_chance_level():
+    from localizer.lookalikes import alike_by_appearance
+
+    # office_b's view, two places per office (world seed 27): the kitchen shares photographs
+    # with the offices, matched often and verified never, but its twin matches the view best
+    matches = {"office_b": (120, 90), "office_a": (166, 117), "kitchen": (63, 1)}
+    matches |= {"corridor": (18, 3), "seminar": (21, 7), "storage": (30, 3)}
+    sizes = dict.fromkeys(matches, 2)
+    assert alike_by_appearance("office_b", matches, sizes) == frozenset()
+    matches["office_a"] = (40, 30)  # were the kitchen the best match, it would be the twin
+    assert alike_by_appearance("office_b", matches, sizes) == {"kitchen"}
+
+
 def test_a_room_sharing_a_few_objects_with_a_twin_of_one_place_does_not_look_alike():
     from localizer.lookalikes import alike_by_appearance
 

@@ -10,10 +10,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from localizer.active import localize_actively
+from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import Localizer
-from localizer.visual_homing import HomingResult
+from localizer.visual_homing import HomingResult, drive_home
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -260,6 +260,27 @@ def test_checks_of_one_room_that_all_miss_count_once_and_leave_the_twins_even(dr
     # one miss of each twin, each folded in once: even again (0.82 for office_b when each
     # miss of office_a was folded in)
     assert abs(odds(result.final, "office_a", "office_b") - 1.0) < 0.05
+
+
+def test_checks_of_one_room_that_all_arrive_count_once(driven):
+    """A robot in office_a whose routes into office_b never start (its places not reached):
+    office_a's checks both arrive, and pass together (the same end place, the same view), so
+    the second tells nothing the first did not."""
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
+    localizer = Localizer(load_map(driven[0]))
+
+    def home(place_id: int) -> HomingResult:
+        goal = localizer.map.fingerprint(place_id)
+        if localizer.map.place(place_id).room == "office_b":
+            return HomingResult(False, 1, 0.5, "converged", goal)
+        return drive_home(robot, goal, localizer.extract, ActiveParams().homing)
+
+    result = localize_actively(localizer, robot, home=home)
+    assert abs(odds(result.first, "office_a", "office_b") - 1.0) < 0.01  # the twins: even
+    arrived = [check.room for check in result.checks if check.confirmed]
+    assert arrived.count("office_a") >= 2
+    # one route's worth of evidence, 0.8 / 0.1 (64 when each arrival was folded in)
+    assert odds(result.final, "office_a", "office_b") == pytest.approx(8.0, rel=0.05)
 
 
 def odds(belief, room: str, other: str) -> float:
