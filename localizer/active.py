@@ -20,6 +20,7 @@ look-alike instead: the room whose place it then reaches at once gains the odds.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -414,30 +415,53 @@ def _route_to_check(
 ) -> tuple[Place, Route] | None:
     """A place to check a likely room from, and its recorded route out of the room to a room
     that has no look-alike. The likely rooms are taken in :func:`rooms_to_check`'s order
-    (``checked``: checks per room so far); in each, the places with a route
-    and a heading, not tried yet, from the one the latest frame matched best. None if there
-    is none."""
+    (``checked``: checks per room so far), those checked as often as each other first by a
+    route that ends in a room their look-alikes do not open onto (:func:`_shared_rooms`), then
+    by any; in each, the places with a route and a heading, not tried yet, from the one the
+    latest frame matched best. None if there is none."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
     graph, places = localizer.map.legs, localizer.map.places
     # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
     # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
     # bathroom_a and bedroom_a: a route between the two ends alike in both)
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
-    for room in rooms_to_check(belief, checked):
-        leave_room = leave | {room}
-        starts = [
-            place
-            for place in places
-            if place.room == room
-            and place.id in graph
-            and place.heading_deg is not None
-            and place.id not in tried
-        ]
-        for place in sorted(starts, key=lambda q: (-counts.get(q.id, 0.0), q.id)):
-            route = route_out(graph, places, place.id, leave_room, params.route_max_m)
-            if route is not None:
-                return place, route
+    rooms = rooms_to_check(belief, checked)
+    for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
+        same_count = list(tier)
+        for strict in (True, False):
+            for room in same_count:
+                leave_room = leave | {room}
+                if strict:
+                    leave_room |= _shared_rooms(localizer, room)
+                starts = [
+                    place
+                    for place in places
+                    if place.room == room
+                    and place.id in graph
+                    and place.heading_deg is not None
+                    and place.id not in tried
+                ]
+                for place in sorted(starts, key=lambda q: (-counts.get(q.id, 0.0), q.id)):
+                    route = route_out(graph, places, place.id, leave_room, params.route_max_m)
+                    if route is not None:
+                        return place, route
     return None
+
+
+def _shared_rooms(localizer: Localizer, room: str) -> set[str]:
+    """The rooms a door joins both to ``room`` and to one of its look-alikes: a hall both
+    twins open onto. A route from ``room`` that ends there, driven from the twin, ends there
+    too, a twin's offset along it, and where that hall repeats (doors at the same spacing) its
+    view there is the end place's: world seed 27's house, two places per room, whose
+    bedrooms' routes ended in the hall, arrived from the other bedroom in 9 of 10 checks, and
+    the building, one place per room, whose office_a's route ended in the corridor, in 4 of 6;
+    routes that ended in a room beyond (the living room, the kitchen) in 1 of 10."""
+    doors: dict[str, set[str]] = {}
+    for a, b in localizer.map.edges:
+        doors.setdefault(a, set()).add(b)
+        doors.setdefault(b, set()).add(a)
+    twins = localizer.lookalikes.get(room, frozenset())
+    return {r for r in doors.get(room, set()) if any(r in doors.get(t, set()) for t in twins)}
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:

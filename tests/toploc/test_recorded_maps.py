@@ -283,6 +283,33 @@ def test_checks_of_one_room_that_all_arrive_count_once(driven):
     assert odds(result.final, "office_a", "office_b") == pytest.approx(8.0, rel=0.05)
 
 
+@pytest.fixture(scope="module")
+def driven_to_kitchen(tmp_path_factory):
+    """The corridor, the twin offices and the kitchen, two places each, recorded on one drive
+    in that order (seed 3): office_a's routes end in the corridor, office_b's in the kitchen."""
+    db = tmp_path_factory.mktemp("driven_kitchen") / "map.db"
+    rooms = (*ROOMS, "kitchen")
+    record_map(make_world("building"), 2, 3, db, rooms=rooms, camera=CAMERA, drive=True)
+    return db
+
+
+def test_twins_are_checked_first_by_a_route_that_ends_beyond_the_hall_they_share(
+    driven_to_kitchen,
+):
+    """Both offices open onto the corridor: office_a's route, driven from office_b, ends in
+    the corridor too, an office's offset along it; office_b's, driven from office_a, does not
+    reach the kitchen."""
+    loaded = load_map(driven_to_kitchen)
+    assert (
+        loaded.likelihood is not None and ("office_a", "office_b") in loaded.likelihood.lookalikes
+    )
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
+    result = localize_actively(Localizer(loaded), robot)
+    first = result.checks[0]
+    assert (first.room, loaded.place(first.end).room) == ("office_b", "kitchen")
+    assert not first.confirmed
+
+
 def odds(belief, room: str, other: str) -> float:
     probability = belief.as_dict()
     return probability[room] / probability[other]
