@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
+from localizer.lookalikes import partners_of
 from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Pose2D, Robot
 from localizer.routes import (
@@ -455,13 +456,10 @@ def _shared_rooms(localizer: Localizer, room: str) -> set[str]:
     view there is the end place's: world seed 27's house, two places per room, whose
     bedrooms' routes ended in the hall, arrived from the other bedroom in 9 of 10 checks, and
     the building, one place per room, whose office_a's route ended in the corridor, in 4 of 6;
-    routes that ended in a room beyond (the living room, the kitchen) in 1 of 10."""
-    doors: dict[str, set[str]] = {}
-    for a, b in localizer.map.edges:
-        doors.setdefault(a, set()).add(b)
-        doors.setdefault(b, set()).add(a)
+    the house's routes that ended in a room beyond (the living room) in 1 of 10."""
+    doors = partners_of(localizer.map.edges)
     twins = localizer.lookalikes.get(room, frozenset())
-    return {r for r in doors.get(room, set()) if any(r in doors.get(t, set()) for t in twins)}
+    return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
