@@ -329,7 +329,7 @@ def test_a_truncated_snapshot_on_the_bus_is_refused_and_no_replica_made(zbus, tm
         for i, chunk in enumerate(chunks)
         if i != 1  # one chunk lost on the way
     ]
-    replicator = MapReplicator(zbus.client, SITE, tmp_path / "replica.db", timeout_s=2.0)
+    replicator = MapReplicator(zbus.client, SITE, tmp_path / "replica.db", timeout_s=10.0)
     try:
         with pytest.raises(bus.BusMessageError, match=r"snapshot is truncated: 1 of \d+ chunks"):
             replicator.sync()
@@ -356,7 +356,7 @@ def test_changes_whose_fingerprint_does_not_decode_leave_the_replica_as_it_was(
         CHANGES_BATCH.encode({"map_id": SITE, "version": 3, "more": False}),
     )
     before = replica.read_bytes()
-    replicator = MapReplicator(zbus.client, SITE, replica, timeout_s=2.0)
+    replicator = MapReplicator(zbus.client, SITE, replica, timeout_s=10.0)
     try:
         with pytest.raises(ReplicaError, match=r"changes refused: change 3: .*descriptors blob"):
             replicator.sync()
