@@ -39,17 +39,23 @@ class IndexParams:
     """FLANN and voting settings: ``trees`` in the kd forest, ``checks`` leaves searched per
     query descriptor, ``neighbours`` looked up per query descriptor, ``max_distance_ratio``
     (neighbours up to this multiple of the nearest distance vote), ``threads`` searching the
-    query's descriptors at once."""
+    query's descriptors at once, ``seed`` of the forest's random splits: FLANN draws them from
+    the building thread's OpenCV RNG, so unseeded a forest built after anything else had drawn
+    from it (a second index in one process, a service re-reading its map after ``map/add``)
+    differed from one built first, and so did its shortlists."""
 
     trees: int = 4
     checks: int = 64
     neighbours: int = 8
     max_distance_ratio: float = 1.25
     threads: int = 2
+    seed: int = 0
 
     def __post_init__(self) -> None:
         if min(self.trees, self.checks, self.neighbours, self.threads) < 1:
             raise ValueError(f"trees, checks, neighbours and threads must be >= 1, got {self}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
         if not self.max_distance_ratio >= 1:
             raise ValueError(f"max_distance_ratio must be >= 1, got {self.max_distance_ratio!r}")
 
@@ -79,6 +85,7 @@ class PlaceIndex:
         descriptors = np.ascontiguousarray(table.descriptors, dtype=np.float32)
         flann = None
         if len(descriptors) > 0:
+            cv2.setRNGSeed(params.seed)  # the forest's splits come from this thread's RNG
             flann = cv2.flann.Index(
                 descriptors, {"algorithm": FLANN_INDEX_KDTREE, "trees": params.trees}
             )

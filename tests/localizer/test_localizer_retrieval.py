@@ -56,6 +56,14 @@ def test_planted_place_is_shortlisted_first() -> None:
         assert index.shortlist(query, 3)[0] == place
 
 
+def test_an_index_built_twice_over_one_map_shortlists_alike() -> None:
+    rng = np.random.default_rng(3)
+    table = random_table(rng, [1000] * 20)
+    queries = rng.random((300, 128), dtype=np.float32)  # no place's: near neighbours by chance
+    first, second = PlaceIndex.build(table), PlaceIndex.build(table)
+    np.testing.assert_array_equal(first.shortlist(queries, 20), second.shortlist(queries, 20))
+
+
 def test_leaving_a_place_out_lets_its_near_copy_win() -> None:
     rng = np.random.default_rng(2)
     table = random_table(rng, [100, 100, 100, 100])

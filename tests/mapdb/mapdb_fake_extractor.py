@@ -68,6 +68,14 @@ def slow_extract(
     return fake_extract(path, presets)
 
 
+def first_slow_extract(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
+    """``fake_extract``, after half a second on images named ``*_000.png``: the first image of
+    a build finishes after the ones behind it."""
+    if Path(path).name.endswith("_000.png"):
+        time.sleep(0.5)
+    return fake_extract(path, presets)
+
+
 def crashing_extract(path: Path, presets: tuple[str, ...]) -> list[Fingerprint]:
     """``fake_extract``, except that the worker process dies on images named ``*_003.png``."""
     if Path(path).name.endswith("_003.png"):

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from mapdb_fake_extractor import crashing_extract, fake_extract
+from mapdb_fake_extractor import crashing_extract, fake_extract, first_slow_extract
 from mapdb_helpers import assert_consistent, table_counts
 
 from mapdb.build import Status, build_map
@@ -19,6 +19,16 @@ from mapdb.errors import BuildAbortedError, DiskFullError
 from mapdb.loading import load_fingerprints
 
 EXTRACT = functools.partial(fake_extract, presets=("sift", "mser"))
+
+
+def test_a_parallel_build_stores_the_places_in_the_manifests_order(
+    make_dataset, map_db: MapDatabase
+) -> None:
+    entries = read_manifest(make_dataset(5))
+    extract = functools.partial(first_slow_extract, presets=("sift",))
+    build_map(map_db, entries, extract, workers=2, progress=False)
+    stored = [Path(place.source).name for place in sorted(map_db.places(), key=lambda p: p.id)]
+    assert stored == [entry.path.name for entry in entries]
 
 
 @pytest.mark.parametrize("workers", [0, 2])
