@@ -261,9 +261,10 @@ def build_map(
     """Add every entry's panorama to ``map_db`` (see the module docstring); return the report.
 
     ``on_outcome`` is called for every image, in the entries' order, once its fate is known
-    (for logging; use ``tqdm.write`` to print under the progress bar). Ctrl-C ends the build cleanly with
-    ``report.interrupted`` set: with ``workers <= 1`` the place being written, if any, is
-    rolled back; with worker processes it is written whole first (see :func:`_extract_parallel`).
+    (for logging; use ``tqdm.write`` to print under the progress bar). Ctrl-C ends the build
+    cleanly with ``report.interrupted`` set: with ``workers <= 1`` the place being written, if
+    any, is rolled back; with worker processes it is written whole first (see
+    :func:`_extract_parallel`).
     """
     report = BuildReport()
 
