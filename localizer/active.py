@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 from localizer.belief import LocalizationState, RoomBelief
@@ -426,39 +426,47 @@ def _route_to_check(
     # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
     # bathroom_a and bedroom_a: a route between the two ends alike in both)
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
+    doors = partners_of(localizer.map.edges)
     rooms = rooms_to_check(belief, checked)
     for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
-        same_count = list(tier)
-        for strict in (True, False):
-            for room in same_count:
-                leave_room = leave | {room}
-                if strict:
-                    leave_room |= _shared_rooms(localizer, room)
-                starts = [
+        starts = {
+            room: sorted(
+                (
                     place
                     for place in places
                     if place.room == room
                     and place.id in graph
                     and place.heading_deg is not None
                     and place.id not in tried
-                ]
-                for place in sorted(starts, key=lambda q: (-counts.get(q.id, 0.0), q.id)):
+                ),
+                key=lambda q: (-counts.get(q.id, 0.0), q.id),
+            )
+            for room in tier
+        }
+        for strict in (True, False):
+            for room, room_starts in starts.items():
+                leave_room = leave | {room}
+                if strict:
+                    twins = localizer.lookalikes.get(room, frozenset())
+                    leave_room |= _shared_rooms(doors, room, twins)
+                for place in room_starts:
                     route = route_out(graph, places, place.id, leave_room, params.route_max_m)
                     if route is not None:
                         return place, route
     return None
 
 
-def _shared_rooms(localizer: Localizer, room: str) -> set[str]:
-    """The rooms a door joins both to ``room`` and to one of its look-alikes: a hall both
-    twins open onto. A route from ``room`` that ends there, driven from the twin, ends there
-    too, a twin's offset along it, and where that hall repeats (doors at the same spacing) its
-    view there is the end place's: world seed 27's house, two places per room, whose
-    bedrooms' routes ended in the hall, arrived from the other bedroom in 9 of 10 checks, and
-    the building, one place per room, whose office_a's route ended in the corridor, in 4 of 6;
-    the house's routes that ended in a room beyond (the living room) in 1 of 10."""
-    doors = partners_of(localizer.map.edges)
-    twins = localizer.lookalikes.get(room, frozenset())
+def _shared_rooms(
+    doors: Mapping[str, frozenset[str]], room: str, twins: Collection[str]
+) -> set[str]:
+    """The rooms a door (``doors``: each room's neighbours) joins both to ``room`` and to one
+    of its look-alikes ``twins``: a hall both twins open onto. A route from ``room`` that
+    ends there, driven from the twin, ends there too, a twin's offset along it, and where that
+    hall repeats (doors at the same spacing) its view there is the end place's: world seed
+    27's house, two places per room, whose bedrooms' routes ended in the hall, arrived from the
+    other bedroom in 9 of 10 checks, and the building, one place per room, whose office_a's
+    route ended in the corridor, in 4 of 6; the house's routes that ended in a room beyond
+    (the living room) in 1 of 10."""
     return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
@@ -470,7 +478,7 @@ def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
     (world seed 27's house, two places per room: the twin bedrooms open onto one hall whose
     doors repeat every 6.6 m, and a robot in bedroom_b drove bedroom_a's two routes to the same
     hall place, arrived both times and ended sure of bedroom_a, 0.985, in 4 of 5 kidnappings;
-    bedroom_b's own route arrives there too, and the two checks cancel). Likewise after a
+    the rival's check, where its room has a route, can tell the other way). Likewise after a
     check that did not arrive (on world seed 14, each of the 10 robots in office_b spent its
     first two of four drives on office_a's routes)."""
     top_p = belief.top[1]
