@@ -9,6 +9,7 @@ toploc's side is a real localizer node serving a fake localization service."""
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from collections.abc import Iterator
@@ -305,6 +306,39 @@ def test_the_bridge_follows_the_localizer_going_and_coming_back(graph):
     with LocalizerNode(graph.zbus.server, ROBOT_ID, graph.service):
         assert wait_for(lambda: graph.bridge.localizer_up, 5)
         assert wait_for(lambda: "stale" not in (graph.bridge.last_published or {"stale": 1}), 5)
+
+
+class HeldService(FakeService):
+    """A service whose belief, taken when asked, is answered only once ``release`` is set."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked = threading.Event()
+        self.release = threading.Event()
+
+    def belief(self) -> dict:
+        answer = self.current
+        self.asked.set()
+        self.release.wait(10)
+        return answer
+
+
+def test_an_answer_older_than_a_belief_published_meanwhile_does_not_replace_it(graph, caplog):
+    caplog.set_level(logging.INFO, logger="toploc.nodes.ros2")
+    held = HeldService()
+    graph.localizer.close()  # the localizer restarts: the bridge asks the new one its belief
+    with LocalizerNode(graph.zbus.server, ROBOT_ID, held) as restarted:
+        assert held.asked.wait(5), "the bridge never asked the restarted localizer"
+        restarted.publish(held.localize(active=False))  # a newer belief, while the answer is out
+        assert wait_for(lambda: graph.bridge.last_published == held.current, 5)
+        held.release.set()
+        assert wait_for(
+            lambda: (
+                "is not published" in caplog.text or graph.bridge.last_published != held.current
+            ),
+            5,
+        )
+        assert graph.bridge.last_published == held.current
 
 
 def test_a_topic_whose_put_fails_does_not_keep_the_others_and_the_belief_is_put_again(graph):

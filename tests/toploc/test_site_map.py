@@ -304,6 +304,15 @@ class FakeSiteNode:
             ),
         ]  # fmt: skip
 
+    def wait_reachable(self, session: zenoh.Session) -> None:
+        """Wait until ``session`` gets this node's answer (its queryables reached the router)."""
+
+        def answers() -> bool:
+            replies = session.get(bus.site_key(SITE, bus.SITE_VERSION), timeout=1.0)
+            return any(reply.ok is not None for reply in replies)
+
+        assert wait_for(answers, 5), "the site node's queryables never reached the client"
+
     def close(self) -> None:
         bus.undeclare_all(self.entities)
 
@@ -321,6 +330,7 @@ def test_a_truncated_snapshot_on_the_bus_is_refused_and_no_replica_made(zbus, tm
     with small_map(tmp_path / "site.db", 3) as map_db:
         data = encode_snapshot(read_snapshot(map_db))
     node = FakeSiteNode(zbus.server, version=3)
+    node.wait_reachable(zbus.client)
     chunks = split_chunks(data, 1000)
     head = {"map_id": SITE, "version": 3, "n_chunks": len(chunks), "total_bytes": len(data),
             "sha256": sha256_hex(data)}  # fmt: skip
@@ -351,6 +361,7 @@ def test_changes_whose_fingerprint_does_not_decode_leave_the_replica_as_it_was(
     broken = (*fingerprint[:8], fingerprint[8][:-4], *fingerprint[9:])  # 4 bytes short
     rows = replace(changes[0].rows, places=place, fingerprints=(broken,))
     node = FakeSiteNode(zbus.server, version=3)
+    node.wait_reachable(zbus.client)
     node.changes_reply = (
         encode_changes(SITE, [replace(changes[0], rows=rows)]),
         CHANGES_BATCH.encode({"map_id": SITE, "version": 3, "more": False}),

@@ -109,6 +109,7 @@ class Ros2Bridge:
         self._publish_lock = threading.Lock()  # one belief's messages before the next's
         self._belief: dict[str, Any] | None = None
         self._published: dict[str, Any] | None = None
+        self._publications_in = 0  # beliefs the localizer published that reached this bridge
         self._localizer_up = False
         self._places: dict[int, dict[str, Any]] = {}
         info = NodeInfo(
@@ -159,10 +160,14 @@ class Ros2Bridge:
             if last is not None:
                 self.publish(mark_stale(last))
             return
+        with self._lock:
+            publications_before = self._publications_in
         try:
-            self.publish(self.localizer.belief())
+            answer = self.localizer.belief()
         except bus.BusError as error:
             _log.warning("could not fetch the localizer's belief: %s", error)
+            return
+        self._publish(answer, unless_published_since=publications_before)
 
     def _forget_places(self) -> None:
         with self._lock:
@@ -185,6 +190,8 @@ class Ros2Bridge:
         return places.get(place_id)
 
     def _on_published(self, belief: dict[str, Any]) -> None:
+        with self._lock:
+            self._publications_in += 1
         self.publish(belief)
 
     # --- the ROS side ------------------------------------------------------------------------
@@ -193,9 +200,24 @@ class Ros2Bridge:
         """Publish ``belief`` on every topic unless it equals the last one published; whether
         it was. Called with each belief the localizer publishes or answers; marked stale while
         the localizer's token is gone."""
+        return self._publish(belief)
+
+    def _publish(
+        self, belief: Mapping[str, Any], unless_published_since: int | None = None
+    ) -> bool:
+        """:meth:`publish`, but with ``unless_published_since`` (the count of the localizer's
+        publications when ``belief`` was asked for) drop ``belief`` if one came since: the answer
+        was on its way while a newer belief was published, and putting it then would leave the
+        topics, and their late joiners, on the older belief."""
         current = dict(belief)
         with self._publish_lock:
             with self._lock:
+                if unless_published_since not in (None, self._publications_in):
+                    _log.info(
+                        "the localizer published a belief while its answer was on the way: "
+                        "the answer, older, is not published"
+                    )
+                    return False
                 if not current.get("stale"):
                     self._belief = current
                     if not self._localizer_up:  # a publication that came after its token went
