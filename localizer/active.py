@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import Counter
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 from localizer.belief import LocalizationState, RoomBelief
@@ -40,6 +40,7 @@ from localizer.routes import (
     route_into,
     route_out,
     route_through,
+    shared_rooms,
 )
 from localizer.visual_homing import (
     HomingError,
@@ -417,7 +418,7 @@ def _route_to_check(
     """A place to check a likely room from, and its recorded route out of the room to a room
     that has no look-alike. The likely rooms are taken in :func:`rooms_to_check`'s order
     (``checked``: checks per room so far), those checked as often as each other first by a
-    route that ends in a room their look-alikes do not open onto (:func:`_shared_rooms`), then
+    route that ends in a room their look-alikes do not open onto (:func:`shared_rooms`), then
     by any; in each, the places with a route and a heading, not tried yet, from the one the
     latest frame matched best. None if there is none."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
@@ -448,26 +449,12 @@ def _route_to_check(
                 leave_room = leave | {room}
                 if strict:
                     twins = localizer.lookalikes.get(room, frozenset())
-                    leave_room |= _shared_rooms(doors, room, twins)
+                    leave_room |= shared_rooms(doors, room, twins)
                 for place in room_starts:
                     route = route_out(graph, places, place.id, leave_room, params.route_max_m)
                     if route is not None:
                         return place, route
     return None
-
-
-def _shared_rooms(
-    doors: Mapping[str, frozenset[str]], room: str, twins: Collection[str]
-) -> set[str]:
-    """The rooms a door (``doors``: each room's neighbours) joins both to ``room`` and to one
-    of its look-alikes ``twins``: a hall both twins open onto. A route from ``room`` that
-    ends there, driven from the twin, ends there too, a twin's offset along it, and where that
-    hall repeats (doors at the same spacing) its view there is the end place's: world seed
-    27's house, two places per room, whose bedrooms' routes ended in the hall, arrived from the
-    other bedroom in 9 of 10 checks, and the building, one place per room, whose office_a's
-    route ended in the corridor, in 4 of 6; the house's routes that ended in a room beyond
-    (the living room) in 1 of 10."""
-    return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:

@@ -195,17 +195,35 @@ def test_a_route_check_never_confirms_the_twin_nor_leaves_the_robot_sure_and_wro
         assert result.final.top[0] == robot.true_room()
 
 
-def test_map_info_says_recorded_drives_tell_the_twins_apart(driven):
+def map_info(db) -> str:
     from click.testing import CliRunner
 
     from toploc.cli import main
 
-    result = CliRunner().invoke(main, ["map", "info", "--db", str(driven[0])])
+    result = CliRunner().invoke(main, ["map", "info", "--db", str(db)])
     assert result.exit_code == 0, result.output
+    return result.output
+
+
+def test_map_info_asks_for_a_drive_beyond_the_hall_both_twins_open_onto(driven):
+    """Every drive out of the offices ends in the corridor, which both open onto."""
+    output = map_info(driven[0])
+    assert (
+        "office_a ~ office_b; no frame tells them apart, and the drives recorded out of them "
+        "end only in corridor"
+    ) in output
+    assert "Record the drive on from one of them into a room beyond" in output
+    assert "or a drive to one" not in output  # no counterparts
+    assert "each has a recorded drive" not in output and "same two spots" not in output
+
+
+def test_map_info_says_a_twins_drive_beyond_the_hall_tells_them_apart(driven_to_kitchen):
+    """office_b's drive goes on into the kitchen; office_a's ends in the corridor."""
+    output = map_info(driven_to_kitchen)
     assert "office_a ~ office_b; no frame tells them apart, but each has a recorded drive" in (
-        result.output
+        output
     )
-    assert "same two spots" not in result.output
+    assert "end only in" not in output and "or a drive to one" not in output
 
 
 @pytest.fixture(scope="module")

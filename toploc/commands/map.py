@@ -414,8 +414,8 @@ def _calibrate(
             click.echo(f"declared look-alikes: {declare[0]} and {declare[1]}")
         click.echo(f"{explain_likelihood(detector, model)}{took}")
         with MapDatabase.open(db_path, readonly=True) as map_db:
-            places = map_db.places()
-        for line in lookalike_lines(model, places):
+            places, edges = map_db.places(), map_db.edges()
+        for line in lookalike_lines(model, places, edges):
             click.echo(line)
         if formula:
             click.echo(f"  {detector} likelihood: {describe_likelihood(model)}")

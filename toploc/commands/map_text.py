@@ -7,8 +7,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from localizer.likelihood import RatioLikelihood
-from localizer.lookalikes import pairs_without_counterparts
-from localizer.routes import ROUTE_MAX_M, rooms_with_routes_out
+from localizer.lookalikes import pairs_without_counterparts, partners_of
+from localizer.routes import ROUTE_MAX_M, rooms_with_routes_out, shared_rooms
 from mapdb.records import MapInfo, Place
 
 
@@ -51,20 +51,35 @@ def explain_likelihood(detector: str, model: RatioLikelihood) -> str:
     )
 
 
-def lookalike_lines(model: RatioLikelihood, places: Sequence[Place]) -> list[str]:
+def lookalike_lines(
+    model: RatioLikelihood, places: Sequence[Place], edges: Sequence[tuple[str, str]] = ()
+) -> list[str]:
     """What the calibration found of look-alike rooms (:mod:`localizer.lookalikes`), and for
     twins without counterparts whether recorded routes tell them apart
-    (:mod:`localizer.routes`) or what to record so that they can be; ``places``: the map's."""
+    (:mod:`localizer.routes`) or what to record so that they can be; ``places`` and ``edges``
+    (the doors): the map's."""
     if not model.lookalikes:
         return []
     room_of = {place.id: place.room for place in places}
-    blind = list(pairs_without_counterparts(model.lookalikes, model.counterparts, room_of))
+    without = list(pairs_without_counterparts(model.lookalikes, model.counterparts, room_of))
+    told = [pair for pair in model.lookalikes if pair not in without]
     paired = {room for pair in model.lookalikes for room in pair}
+    doors, twins = partners_of(edges), partners_of(model.lookalikes)
+    beyond = {
+        room
+        for room in paired
+        if room
+        in rooms_with_routes_out(
+            places, paired | shared_rooms(doors, room, twins[room]), ROUTE_MAX_M
+        )
+    }
     routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M)
-    driven = [pair for pair in blind if set(pair) <= routed]
-    blind = [pair for pair in blind if pair not in driven]
+    blind = [pair for pair in without if not set(pair) <= routed]
+    # a drive that ends in the hall both twins open onto arrives from the twin too where the
+    # hall looks alike at both doors; a twin's drive on beyond it tells for the pair
+    in_hall = [pair for pair in without if set(pair) <= routed and not set(pair) & beyond]
+    driven = [pair for pair in without if set(pair) <= routed and set(pair) & beyond]
     lines = []
-    told = [pair for pair in model.lookalikes if pair not in blind]
     if told:
         lines.append(
             f"  look-alike rooms: {_pairs(told)}; some of their places stand at the same spots "
@@ -75,6 +90,16 @@ def lookalike_lines(model: RatioLikelihood, places: Sequence[Place]) -> list[str
             f"  look-alike rooms: {_pairs(driven)}; no frame tells them apart, but each has a "
             "recorded drive out to a room without a look-alike: an active localization drives "
             "it out and back and tells them apart"
+        )
+    if in_hall:
+        rooms = sorted({room for pair in in_hall for room in pair})
+        halls = sorted({hall for room in rooms for hall in shared_rooms(doors, room, twins[room])})
+        lines.append(
+            f"  look-alike rooms: {_pairs(in_hall)}; no frame tells them apart, and the drives "
+            f"recorded out of them end only in {', '.join(halls)}, which both open onto: "
+            "driven from the look-alike such a drive ends there too, and arrives where the "
+            "hall looks the same at both doors. Record the drive on from one of them into a "
+            "room beyond (toploc map record --every-m, --after)"
         )
     if blind:
         lines.append(
@@ -105,7 +130,7 @@ def format_info(info: MapInfo, places: Sequence[Place] = ()) -> str:
         else []
     )
     models = [RatioLikelihood.from_json(model) for model in info.likelihoods.values()]
-    lookalikes = lookalike_lines(models[0], places) if models else []
+    lookalikes = lookalike_lines(models[0], places, info.edges) if models else []
     lines = [
         f"{info.path}: schema {info.schema_version}, {info.file_size_bytes / 1e6:.2f} MB, "
         f"{len(info.rooms)} rooms, {info.n_places} places",
