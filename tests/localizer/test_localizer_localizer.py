@@ -194,6 +194,33 @@ def test_a_frame_where_the_robot_homed_to_a_rooms_one_place_favours_it_by_at_mos
     assert held["attic"] == pytest.approx(HOMED_ONE_PLACE_RATIO * held["cellar"])
 
 
+def test_doubting_a_room_takes_back_its_lead_over_the_likeliest_other():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"attic": 100.0, "cellar": 1.0})  # what frames said for the attic
+    belief = localizer.doubt("attic").as_dict()  # its check did not arrive
+    assert belief["attic"] == pytest.approx(belief["cellar"])
+    assert localizer.doubt("cellar").as_dict() == pytest.approx(belief)  # no lead: unchanged
+
+
+def test_a_doubted_room_gains_nothing_from_frames_until_the_belief_starts_afresh():
+    localizer = Localizer(one_and_two_place_map())
+    frame = frame_seeing(localizer, 1, "attic", 0.9)  # 60 inliers with the attic's place
+    localizer.doubt("attic")  # its check did not arrive: the frame may be an unknown twin's
+    held = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
+    assert held["attic"] == pytest.approx(held["cellar"])
+    before = localizer.belief().as_dict()["attic"]
+    assert localizer.update(frame).as_dict()["attic"] == pytest.approx(before)
+    localizer.reset()
+    seen = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
+    assert seen["attic"] > 10 * seen["cellar"]
+
+
+def test_doubting_a_room_the_map_lacks_is_refused_by_name():
+    localizer = Localizer(one_and_two_place_map())
+    with pytest.raises(ValueError, match="no room 'garage'"):
+        localizer.doubt("garage")
+
+
 def test_a_frame_where_the_robot_homed_to_a_place_of_a_room_of_two_is_read_in_full():
     from dataclasses import replace as with_field
 
