@@ -37,6 +37,7 @@ from localizer.routes import (
     DriveFrame,
     Route,
     drive_route,
+    rooms_with_routes_beyond,
     route_into,
     route_out,
     route_through,
@@ -675,30 +676,13 @@ def _hall_check_alone(localizer: Localizer, room: str, route: Route, params: Act
     (:func:`shared_rooms`) while none of them has a recorded route (up to ``route_max_m``) on
     beyond its own hall: the check then stands alone, at the hall's rates
     (:class:`ActiveParams`)."""
-    lookalikes = localizer.lookalikes
-
-    def twins_of(name: str) -> frozenset[str]:
-        return lookalikes.get(name, frozenset())
-
-    twins = twins_of(room)
+    twins = localizer.lookalikes.get(room, frozenset())
     doors = partners_of(localizer.map.edges)
     if localizer.map.place(route.end).room not in shared_rooms(doors, room, twins):
         return False
-    leave = {name for name, partners in lookalikes.items() if partners}
-    graph, places = localizer.map.legs, localizer.map.places
-    beyond = (
-        route_out(
-            graph,
-            places,
-            place.id,
-            leave | {twin} | shared_rooms(doors, twin, twins_of(twin)),
-            params.route_max_m,
-        )
-        for twin in twins
-        for place in places
-        if place.room == twin and place.id in graph
-    )
-    return all(found is None for found in beyond)
+    places = localizer.map.places
+    beyond = rooms_with_routes_beyond(places, localizer.lookalikes, doors, params.route_max_m)
+    return not twins & beyond
 
 
 def _look_at_end(localizer: Localizer, robot: Robot, end: int) -> tuple[bool, float]:

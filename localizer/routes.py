@@ -137,6 +137,26 @@ def shared_rooms(
     return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
+def rooms_with_routes_beyond(
+    places: Sequence[Place],
+    lookalikes: Mapping[str, frozenset[str]],
+    doors: Mapping[str, frozenset[str]],
+    max_length_m: float,
+) -> set[str]:
+    """The rooms with look-alikes (``lookalikes``: each room's) that have a place with a
+    recorded route (at most ``max_length_m``) on beyond the hall they share with them
+    (:func:`shared_rooms`; ``doors``: each room's neighbours) to a room without look-alikes."""
+    paired = {room for room, twins in lookalikes.items() if twins}
+    return {
+        room
+        for room in paired
+        if room
+        in rooms_with_routes_out(
+            places, paired | shared_rooms(doors, room, lookalikes[room]), max_length_m
+        )
+    }
+
+
 def rooms_with_routes_out(
     places: Sequence[Place], leave: Collection[str], max_length_m: float
 ) -> set[str]:

@@ -8,7 +8,12 @@ from collections.abc import Sequence
 
 from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts, partners_of
-from localizer.routes import ROUTE_MAX_M, rooms_with_routes_out, shared_rooms
+from localizer.routes import (
+    ROUTE_MAX_M,
+    rooms_with_routes_beyond,
+    rooms_with_routes_out,
+    shared_rooms,
+)
 from mapdb.records import MapInfo, Place
 
 
@@ -65,14 +70,7 @@ def lookalike_lines(
     told = [pair for pair in model.lookalikes if pair not in without]
     paired = {room for pair in model.lookalikes for room in pair}
     doors, twins = partners_of(edges), partners_of(model.lookalikes)
-    beyond = {
-        room
-        for room in paired
-        if room
-        in rooms_with_routes_out(
-            places, paired | shared_rooms(doors, room, twins[room]), ROUTE_MAX_M
-        )
-    }
+    beyond = rooms_with_routes_beyond(places, twins, doors, ROUTE_MAX_M)
     routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M)
     blind = [pair for pair in without if not set(pair) <= routed]
     # a drive that ends in the hall both twins open onto arrives from the twin too where the
