@@ -118,8 +118,9 @@ def recorded_db(
     return db
 
 
-def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]:
-    db = recorded_db(
+def args_db(args: argparse.Namespace, world: str, places: int) -> Path:
+    """:func:`recorded_db` for the command line's options."""
+    return recorded_db(
         Path(args.cache_dir),
         world,
         args.world_seed,
@@ -130,6 +131,10 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         args.advised_offset,
         args.drive,
     )
+
+
+def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]:
+    db = args_db(args, world, places)
 
     def show(trial: Trial) -> None:
         if args.verbose:
@@ -195,7 +200,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default="building,house")
     parser.add_argument("--places", default="1,2,3,5", help="places per room, comma-separated")
-    parser.add_argument("--trials", type=int, default=20)
+    parser.add_argument(
+        "--trials", type=int, default=20, help="kidnappings per map; 0: record the maps only"
+    )
     parser.add_argument("--policy", default="separating")
     parser.add_argument("--record-seed", type=int, default=0)
     parser.add_argument("--world-seed", type=int, default=0)
@@ -231,12 +238,19 @@ def main() -> None:
             parser.error(
                 f"world {world!r} has no look-alike rooms; choose from {list(KIDNAP_ROOMS)}"
             )
+    if args.trials < 0:
+        parser.error(f"--trials must be >= 0, got {args.trials}")
     rows = []
     for world in worlds:
         for places in (int(k) for k in args.places.split(",")):
             print(f"{world}, {places} places per room:")
+            if not args.trials:  # record (or calibrate) the map only
+                args_db(args, world, places)
+                continue
             rows.append(run_one(args, world, places))
             print_table(rows[-1:])
+    if not rows:
+        return
     print()
     print(
         f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "

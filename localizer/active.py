@@ -20,6 +20,7 @@ look-alike instead: the room whose place it then reaches at once gains the odds.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections import Counter
@@ -91,11 +92,16 @@ class ActiveParams:
     Route checks (:class:`RouteCheck`): routes up to ``route_max_m`` long; the robot
     "arrived at once" when homing to the route's end place arrives after at most
     ``route_slack_m`` plus ``route_slack_share`` of the route's length (the odometry's drift
-    over the route) and the look there names the end place's room. ``route_hit_rate``: how
-    often that happens when the robot did start in the route's room; ``route_false_rate``:
-    when it started elsewhere. A check that arrives multiplies its room's odds by their
-    ratio (8), one that does not by ``(1 - hit) / (1 - false)`` (0.22), once the robot is
-    back at the start. On the maps of world seeds 17–20 recorded on one drive (K = 1, 2, 3;
+    over the route), never more than ``route_slack_max_m``, and the look there names the end
+    place's room. The cap: a route driven from a twin can end where the end place is in sight
+    a few metres on (world seed 31's house: bedroom_b's 11 m route into the living room, driven
+    from bedroom_a, stopped at the hall's end, and homing reached the living room's place after
+    4.0 m, within the 4.3 m the share allowed); of 885 checks that arrived from the route's own
+    room in sessions 23-26's runs, 15 took more than 2.5 m, of 257 from elsewhere 20.
+    ``route_hit_rate``: how often that happens when the robot did start in the route's room;
+    ``route_false_rate``: when it started elsewhere. A check that arrives multiplies its room's
+    odds by their ratio (8), one that does not by ``(1 - hit) / (1 - false)`` (0.22), once the
+    robot is back at the start. On the maps of world seeds 17–20 recorded on one drive (K = 1, 2, 3;
     session 21's runs of ``benchmarks/bench_recorded_maps.py``), 205 of the 244 checks back
     at the start arrived when the robot was in the route's room (0.84, 90 % interval
     0.80–0.88), and 4 of 166 when it was in another (0.024, interval 0.008–0.054): the hit
@@ -132,6 +138,7 @@ class ActiveParams:
     hall_route_false_rate: float = 0.4
     route_slack_m: float = 1.0
     route_slack_share: float = 0.3
+    route_slack_max_m: float = 2.5
 
     def __post_init__(self) -> None:
         for name in ("route", "hall_route"):
@@ -434,7 +441,12 @@ def _route_to_check(
     (``checked``: checks per room so far), those checked as often as each other first by a
     route that ends in a room their look-alikes do not open onto (:func:`shared_rooms`), then
     by any; in each, the places with a route and a heading, not tried yet, from the one the
-    latest frame matched best. None if there is none."""
+    latest frame matched best. None if there is none. A room whose look-alike has a shorter
+    route beyond is checked by its shortest route, into the hall too: where the pair's two
+    checks disagree, the one beyond tells, and the hall check agrees with it (76 of 77 such
+    pairs right, docs/results.md); a longer route drifts more (world seed 31's building: with
+    the legs joined, office_a's 12 m route to the kitchen arrived from office_a in 5 of 10
+    first checks; its 3 m route into the corridor, before, in 10 of the 10 that started)."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
     graph, places = localizer.map.legs, localizer.map.places
     # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
@@ -443,6 +455,7 @@ def _route_to_check(
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
     doors = partners_of(localizer.map.edges)
     rooms = rooms_to_check(belief, checked)
+    beyond_m = functools.cache(lambda room: _beyond_m(localizer, room, params))
     for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
         starts = {
             room: sorted(
@@ -463,12 +476,29 @@ def _route_to_check(
                 leave_room = leave | {room}
                 if strict:
                     twins = localizer.lookalikes.get(room, frozenset())
+                    if any(beyond_m(twin) < beyond_m(room) for twin in twins):
+                        continue  # the twin's route beyond tells for the pair: any route here
                     leave_room |= shared_rooms(doors, room, twins)
                 for place in room_starts:
                     route = route_out(graph, places, place.id, leave_room, params.route_max_m)
                     if route is not None:
                         return place, route
     return None
+
+
+def _beyond_m(localizer: Localizer, room: str, params: ActiveParams) -> float:
+    """The length (metres) of the shortest recorded route from a place of ``room`` on beyond
+    the hall it shares with its look-alikes to a room without look-alikes; inf if none."""
+    graph, places = localizer.map.legs, localizer.map.places
+    twins = localizer.lookalikes.get(room, frozenset())
+    leave = {name for name, partners in localizer.lookalikes.items() if partners}
+    leave |= {room, *shared_rooms(partners_of(localizer.map.edges), room, twins)}
+    routes = (
+        route_out(graph, places, place.id, leave, params.route_max_m)
+        for place in places
+        if place.room == room and place.id in graph and place.heading_deg is not None
+    )
+    return min((route.length_m for route in routes if route is not None), default=math.inf)
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
@@ -524,10 +554,12 @@ def _check_route(
     :func:`rooms_to_check`). The way back: if homing to the route's end
     place arrived but not at once, by a recorded route from there into ``rival`` (``start``'s
     likely look-alike, if any); otherwise back along the views taken on the way out, to
-    ``start``. Returns the check, the frames captured, the homing to the route's end place and
-    the last observation."""
+    ``start``. A check whose homing to ``start`` does not arrive drives no route: the robot
+    homes back to the place it stood at, if it stood at one. Returns the check, the frames
+    captured, the homing to the route's end place and the last observation."""
     assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
     distance, frames = 0.0, 0
+    stood_at = localizer.latest.at_place if localizer.latest is not None else None
     to_start = home(start.id)
     distance += to_start.distance_m
     frames += len(to_start.lengths)
@@ -593,6 +625,15 @@ def _check_route(
                     localizer.update_rooms({start.room: ratio})
             elif not back.arrived:  # not back: it may be in any room now, the look decides
                 localizer.reset()
+    elif not to_start.arrived and stood_at is not None and to_start.reason != CANCELLED:
+        # the check could not start: back to the place the robot stood at, not left where the
+        # homing gave up (world seed 30's house, one place per room: a robot at bedroom_b's
+        # place by its door, whose homing to the hall's place gave up in the hall, looked there
+        # and ended sure of bedroom_b, 0.977, no longer in it)
+        back = home(stood_at)
+        distance += back.distance_m
+        frames += len(back.lengths)
+        homed_to = stood_at if back.arrived else None
     localizer.predict(HOMING_STAY_PROBABILITY)
     latest = localizer.latest
     if homed_to is not None and latest is not None and latest.at_place == homed_to:
@@ -647,7 +688,9 @@ def _back_by_marks(
 def _at_once(homed: HomingResult, route: Route, params: ActiveParams) -> bool:
     """Whether homing to ``route``'s end place, after driving the route, arrived at once: after
     at most the odometry's drift over the route (:class:`ActiveParams`)."""
-    slack_m = params.route_slack_m + params.route_slack_share * route.length_m
+    slack_m = min(
+        params.route_slack_m + params.route_slack_share * route.length_m, params.route_slack_max_m
+    )
     return homed.arrived and homed.distance_m <= slack_m
 
 
@@ -681,7 +724,9 @@ def _hall_check_alone(localizer: Localizer, room: str, route: Route, params: Act
     if localizer.map.place(route.end).room not in shared_rooms(doors, room, twins):
         return False
     places = localizer.map.places
-    beyond = rooms_with_routes_beyond(places, localizer.lookalikes, doors, params.route_max_m)
+    beyond = rooms_with_routes_beyond(
+        places, localizer.lookalikes, doors, params.route_max_m, localizer.map.legs
+    )
     return not twins & beyond
 
 

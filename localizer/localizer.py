@@ -143,7 +143,8 @@ class LoadedMap:
 
     @cached_property
     def legs(self) -> nx.Graph:
-        """The places joined by the legs they were recorded on (see
+        """The places joined by the legs they were recorded on, and the legs where they pass
+        each other: the graph recorded routes are found in (see
         :func:`localizer.routes.leg_graph`)."""
         return leg_graph(self.places)
 

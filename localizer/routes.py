@@ -3,8 +3,10 @@
 A place recorded on a drive keeps its :class:`~mapdb.records.Leg`: the place recorded before it
 and the odometry positions driven between. The legs join places into a graph; along a path of
 legs every pose is in one frame, the odometry frame of the drive that recorded them (the
-*drive frame*). A :class:`Route` is such a path, from a start place to an end place, as the
-positions to drive through. Look-alike rooms that no place tells apart are told apart this way
+*drive frame*). Legs of one drive that pass near each other (the drive crossed the hall again
+on its way to the next room) join there too, so a route need not retrace the drive's detours
+(:func:`leg_graph`). A :class:`Route` is such a path, from a start place to an end place, as
+the positions to drive through. Look-alike rooms that no place tells apart are told apart this way
 (:mod:`localizer.active`): a robot that homed to a place of one twin drives that twin's route
 out of the room; if it is in the other twin, the same drive ends somewhere else.
 
@@ -20,7 +22,10 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import cast
 
+import cv2
 import networkx as nx
+import numpy as np
+from scipy.spatial import cKDTree
 
 from homing.bearings import wrap_angle_rad
 from localizer.robot_protocol import Pose2D, Robot
@@ -47,34 +52,88 @@ def _length_m(points: Sequence[tuple[float, float]]) -> float:
     return sum(math.dist(a, b) for a, b in itertools.pairwise(points))
 
 
-def leg_graph(places: Sequence[Place]) -> nx.Graph:
-    """The places joined by their legs: an undirected graph on place ids whose edges carry
-    ``points`` (the leg's positions from the lower id to the higher, ends included, drive
-    frame) and ``length_m``. Places without a leg (nor one from them) are not in it; a leg
-    from a place that has no position, or that is not among ``places``, is left out."""
+RoadNode = int | tuple[int, int]
+"""A node of :func:`leg_graph`: a place id, or ``(place id, k)``, the ``k``-th point along the
+leg the place was recorded on."""
+JUNCTION_M = 0.3
+"""Two legs of one drive join where they pass within this distance (metres, drive frame) of
+each other. The simulated recording keeps 0.2 m from walls, so points on the two sides of a
+wall are at least 0.4 m apart (a robot driven closer along both sides of a thin wall would get
+a junction through it: a route through there bumps, slides and, in a check, misses); on a
+drive of the house (world seed 31, two places per room) the legs
+joined this way cut the routes from bedroom_b to the hall from 25 m to 3 m, and from
+bathroom_a to the hall from 14 m (through bedroom_a) to 4 m."""
+LEG_STEP_M = 0.2
+"""The legs are looked at every this many metres for where they pass near each other."""
+SIMPLIFY_M = 0.1
+"""A route keeps only the points it needs to stay within this distance of its course (metres):
+each point is a stop and a view taken for the way back, and ``toploc map record`` keeps a
+position every 0.1 m driven."""
+
+
+def leg_graph(places: Sequence[Place], junction_m: float = JUNCTION_M) -> nx.Graph:
+    """The places joined by the legs they were recorded on, as a graph to find routes in: its
+    nodes are place ids and points along the legs (tuples), each with its position ``xy``
+    (drive frame, metres); its edges join each node to the next along a leg, and two points of
+    legs of one drive that pass within ``junction_m`` of each other (0: no such junctions), each
+    with its ``length_m``. A route need not retrace the drive's detours: where the drive crossed
+    the hall again on its way to the next room, it can turn there. Places without a leg (nor one
+    from them) are not in it; a leg from a place that has no position, or that is not among
+    ``places``, is left out. A junction joins legs of one drive only (legs joined through their
+    places): another drive's odometry is another frame."""
     by_id = {place.id: place for place in places}
-    graph: nx.Graph[int] = nx.Graph()
+    legs: nx.Graph[int] = nx.Graph()
+    roads: nx.Graph[RoadNode] = nx.Graph()
     for place in places:
         leg = place.leg
         origin = by_id.get(leg.from_place) if leg is not None else None
         if leg is None or origin is None or origin.xy_m is None or place.xy_m is None:
             continue
-        points = (origin.xy_m, *leg.via_xy_m, place.xy_m)
-        if origin.id > place.id:
-            points = tuple(reversed(points))
-        low, high = sorted((origin.id, place.id))
-        graph.add_edge(low, high, points=points, length_m=_length_m(points))
-    return graph
+        legs.add_edge(origin.id, place.id)
+        dense = _densified((origin.xy_m, *leg.via_xy_m, place.xy_m), LEG_STEP_M)
+        along: list[RoadNode] = [origin.id, *((place.id, k) for k in range(1, len(dense) - 1))]
+        along.append(place.id)
+        for node, at in zip(along, dense, strict=True):
+            roads.add_node(node, xy=at)
+        for u, v in itertools.pairwise(along):
+            roads.add_edge(u, v, length_m=math.dist(roads.nodes[u]["xy"], roads.nodes[v]["xy"]))
+    if junction_m > 0 and len(roads):
+        drives = enumerate(nx.connected_components(legs))  # one drive: one odometry frame
+        drive = {place: k for k, piece in drives for place in piece}
+        nodes: list[RoadNode] = list(roads.nodes)
+        pieces = [drive[node if isinstance(node, int) else node[0]] for node in nodes]
+        xy = np.array([roads.nodes[node]["xy"] for node in nodes], dtype=np.float64)
+        for i, j in cKDTree(xy).query_pairs(junction_m):
+            if pieces[i] == pieces[j] and not roads.has_edge(nodes[i], nodes[j]):
+                roads.add_edge(nodes[i], nodes[j], length_m=math.dist(xy[i], xy[j]))
+    return roads
 
 
-def _path_points(graph: nx.Graph, path: Sequence[int]) -> list[tuple[float, float]]:
-    """The positions along ``path`` (place ids), ends included."""
-    points: list[tuple[float, float]] = []
-    for a, b in itertools.pairwise(path):
-        leg = graph.edges[a, b]["points"]
-        leg = leg if a < b else tuple(reversed(leg))
-        points.extend(leg if not points else leg[1:])
-    return points
+def _densified(points: Sequence[tuple[float, float]], step_m: float) -> list[tuple[float, float]]:
+    """``points`` with points added on each segment so that none is longer than ``step_m``."""
+    dense = [points[0]]
+    for (x0, y0), (x1, y1) in itertools.pairwise(points):
+        n = max(1, math.ceil(math.dist((x0, y0), (x1, y1)) / step_m))
+        dense.extend((x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n) for k in range(1, n))
+        dense.append((x1, y1))
+    return dense
+
+
+def _simplified(
+    points: Sequence[tuple[float, float]], tolerance_m: float
+) -> tuple[tuple[float, float], ...]:
+    """``points`` (a polyline) without the points it can do without while staying within
+    ``tolerance_m`` of them (Douglas-Peucker, ``cv2.approxPolyDP``); the ends are kept exact."""
+    if len(points) <= 2:
+        return tuple(points)
+    curve = np.asarray(points, dtype=np.float32).reshape(-1, 2)
+    kept = cv2.approxPolyDP(curve.reshape(-1, 1, 2), tolerance_m, False).reshape(-1, 2)
+    indices, k = [], 0
+    for point in kept:  # a subset of the points, in order, as float32: back to the points
+        while not np.array_equal(curve[k], point):
+            k += 1
+        indices.append(k)
+    return tuple(points[i] for i in indices)
 
 
 def route_out(
@@ -119,8 +178,8 @@ def _shortest_route(
     if not ends:
         return None
     end = min(ends, key=lambda node: (lengths[node], node))
-    points = _path_points(graph, paths[end])
-    return Route(start, end, points[0], tuple(points[1:]), float(lengths[end]))
+    points = _simplified([graph.nodes[node]["xy"] for node in paths[end]], SIMPLIFY_M)
+    return Route(start, end, points[0], points[1:], float(lengths[end]))
 
 
 def shared_rooms(
@@ -142,31 +201,43 @@ def rooms_with_routes_beyond(
     lookalikes: Mapping[str, frozenset[str]],
     doors: Mapping[str, frozenset[str]],
     max_length_m: float,
+    graph: nx.Graph | None = None,
 ) -> set[str]:
     """The rooms with look-alikes (``lookalikes``: each room's) that have a place with a
     recorded route (at most ``max_length_m``) on beyond the hall they share with them
-    (:func:`shared_rooms`; ``doors``: each room's neighbours) to a room without look-alikes."""
+    (:func:`shared_rooms`; ``doors``: each room's neighbours) to a room without look-alikes;
+    ``graph``: the places' :func:`leg_graph`, if built already."""
     paired = {room for room, twins in lookalikes.items() if twins}
+    graph = leg_graph(places) if graph is None else graph
     return {
         room
         for room in paired
-        if room
-        in rooms_with_routes_out(
-            places, paired | shared_rooms(doors, room, lookalikes[room]), max_length_m
+        if rooms_with_routes_out(
+            places,
+            paired | shared_rooms(doors, room, lookalikes[room]),
+            max_length_m,
+            {room},
+            graph,
         )
     }
 
 
 def rooms_with_routes_out(
-    places: Sequence[Place], leave: Collection[str], max_length_m: float
+    places: Sequence[Place],
+    leave: Collection[str],
+    max_length_m: float,
+    rooms: Collection[str] | None = None,
+    graph: nx.Graph | None = None,
 ) -> set[str]:
-    """The rooms with a place that has a recorded route (at most ``max_length_m``) to a room
-    neither in ``leave`` nor the place's own."""
-    graph = leg_graph(places)
+    """The rooms (of ``rooms``; None: any) with a place that has a recorded route (at most
+    ``max_length_m``) to a room neither in ``leave`` nor the place's own; ``graph``: the
+    places' :func:`leg_graph`, if built already."""
+    graph = leg_graph(places) if graph is None else graph
     return {
         place.room
         for place in places
-        if route_out(graph, places, place.id, {*leave, place.room}, max_length_m) is not None
+        if (rooms is None or place.room in rooms)
+        and route_out(graph, places, place.id, {*leave, place.room}, max_length_m) is not None
     }
 
 

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 
+import networkx as nx
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from localizer.robot_protocol import MoveResult, Pose2D
 from localizer.routes import (
+    JUNCTION_M,
     ODOMETRY,
     DriveFrame,
     Route,
@@ -33,10 +35,12 @@ PLACES = (
 
 
 def test_places_are_joined_by_the_legs_they_were_recorded_on() -> None:
-    graph = leg_graph(PLACES)
-    assert sorted(graph.edges) == [(1, 2), (2, 3), (3, 4)]
-    assert graph.edges[2, 3]["points"] == ((1.0, 0.0), (1.0, 1.0), (1.5, 2.0), (1.0, 3.0))
-    assert graph.edges[1, 2]["length_m"] == pytest.approx(1.0)
+    graph = leg_graph(PLACES, junction_m=0.0)
+    assert sorted(node for node in graph if isinstance(node, int)) == [1, 2, 3, 4]
+    assert nx.shortest_path_length(graph, 1, 2, weight="length_m") == pytest.approx(1.0)
+    leg_m = 1.0 + 2 * math.hypot(0.5, 1.0)  # through (1, 1) and (1.5, 2)
+    assert nx.shortest_path_length(graph, 2, 3, weight="length_m") == pytest.approx(leg_m)
+    assert graph.nodes[3]["xy"] == (1.0, 3.0)
     assert 5 not in graph
 
 
@@ -46,7 +50,7 @@ def test_a_leg_from_a_place_without_a_position_joins_nothing() -> None:
 
 
 def test_the_way_out_is_the_shortest_route_to_another_room() -> None:
-    route = route_out(leg_graph(PLACES), PLACES, 1, {"office"}, max_length_m=20.0)
+    route = route_out(leg_graph(PLACES, junction_m=0.0), PLACES, 1, {"office"}, max_length_m=20.0)
     assert route is not None
     assert (route.start, route.end) == (1, 3)
     assert route.start_xy_m == (0.0, 0.0)
@@ -75,6 +79,50 @@ def test_the_way_into_a_room_is_the_shortest_route_to_one_of_its_places() -> Non
 def test_the_way_into_its_own_room_leads_to_another_place_of_it() -> None:
     route = route_into(leg_graph(PLACES), PLACES, 1, {"office"}, max_length_m=20.0)
     assert route is not None and route.end == 2
+
+
+# A drive: hall place 1, into the office (place 2) and back out through the hall, past place
+# 1, to the kitchen (place 3). The legs alone lead from the kitchen to the hall through the
+# office; where the last leg passes place 1 they join.
+DRIVE = (
+    Place(1, "hall", 0.0, 0.0, 0.0),
+    Place(2, "office", 0.0, 3.0, 90.0, leg=Leg(1, ((0.0, 1.5),))),
+    Place(3, "kitchen", 5.0, 0.0, 0.0, leg=Leg(2, ((0.0, 1.5), (0.0, 0.2)))),
+)
+
+
+def test_legs_of_one_drive_join_where_they_pass_each_other() -> None:
+    route = route_into(leg_graph(DRIVE), DRIVE, 3, {"hall"}, max_length_m=20.0)
+    assert route is not None and route.end == 1
+    assert route.length_m < 5.0 + JUNCTION_M  # through the office: 10.8 m
+    assert max(y for _, y in route.waypoints_xy_m) < 0.5  # not through the office
+
+
+def test_a_route_stops_only_where_it_turns() -> None:
+    """``toploc map record`` keeps a position every 0.1 m: a route through all of them would
+    stop and look at each."""
+    trail = tuple((0.1 * k, 0.0) for k in range(1, 30)) + tuple((3.0, 0.1 * k) for k in range(20))
+    places = (
+        Place(1, "office", 0.0, 0.0, 0.0),
+        Place(2, "corridor", 3.0, 2.0, 90.0, leg=Leg(1, trail)),
+    )
+    route = route_out(leg_graph(places, junction_m=0.0), places, 1, {"office"}, max_length_m=20.0)
+    assert route is not None
+    assert route.waypoints_xy_m == ((3.0, 0.0), (3.0, 2.0))
+    assert route.length_m == pytest.approx(5.0)
+
+
+def test_legs_of_two_drives_do_not_join() -> None:
+    """Another drive's odometry is another frame: near in numbers is not near on the floor."""
+    other = Place(5, "kitchen", 5.0, 0.0, 0.0, leg=Leg(4, ((0.0, 1.5), (0.0, 0.2))))
+    places = (*DRIVE[:2], Place(4, "office", 0.0, 3.0, 90.0), other)
+    graph = leg_graph(places)
+    assert not nx.has_path(graph, 5, 1)
+
+
+def test_a_junction_that_saves_little_is_no_shortcut() -> None:
+    graph = leg_graph(PLACES)
+    assert not any(shortcut for _, _, shortcut in graph.edges(data="shortcut"))
 
 
 poses = st.builds(

@@ -10,6 +10,7 @@ from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts, partners_of
 from localizer.routes import (
     ROUTE_MAX_M,
+    leg_graph,
     rooms_with_routes_beyond,
     rooms_with_routes_out,
     shared_rooms,
@@ -70,8 +71,9 @@ def lookalike_lines(
     told = [pair for pair in model.lookalikes if pair not in without]
     paired = {room for pair in model.lookalikes for room in pair}
     doors, twins = partners_of(edges), partners_of(model.lookalikes)
-    beyond = rooms_with_routes_beyond(places, twins, doors, ROUTE_MAX_M)
-    routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M)
+    graph = leg_graph(places)
+    beyond = rooms_with_routes_beyond(places, twins, doors, ROUTE_MAX_M, graph)
+    routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M, paired, graph)
     blind = [pair for pair in without if not set(pair) <= routed]
     # a drive that ends in the hall both twins open onto arrives from the twin too where the
     # hall looks alike at both doors; a twin's drive on beyond it tells for the pair
