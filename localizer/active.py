@@ -39,6 +39,7 @@ from localizer.routes import (
     Route,
     drive_route,
     rooms_with_routes_beyond,
+    route_beyond_m,
     route_into,
     route_out,
     route_through,
@@ -455,7 +456,11 @@ def _route_to_check(
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
     doors = partners_of(localizer.map.edges)
     rooms = rooms_to_check(belief, checked)
-    beyond_m = functools.cache(lambda room: _beyond_m(localizer, room, params))
+    beyond_m = functools.cache(
+        lambda room: route_beyond_m(
+            graph, places, room, localizer.lookalikes, doors, params.route_max_m
+        )
+    )
     for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
         starts = {
             room: sorted(
@@ -484,21 +489,6 @@ def _route_to_check(
                     if route is not None:
                         return place, route
     return None
-
-
-def _beyond_m(localizer: Localizer, room: str, params: ActiveParams) -> float:
-    """The length (metres) of the shortest recorded route from a place of ``room`` on beyond
-    the hall it shares with its look-alikes to a room without look-alikes; inf if none."""
-    graph, places = localizer.map.legs, localizer.map.places
-    twins = localizer.lookalikes.get(room, frozenset())
-    leave = {name for name, partners in localizer.lookalikes.items() if partners}
-    leave |= {room, *shared_rooms(partners_of(localizer.map.edges), room, twins)}
-    routes = (
-        route_out(graph, places, place.id, leave, params.route_max_m)
-        for place in places
-        if place.room == room and place.id in graph and place.heading_deg is not None
-    )
-    return min((route.length_m for route in routes if route is not None), default=math.inf)
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:

@@ -207,19 +207,34 @@ def rooms_with_routes_beyond(
     recorded route (at most ``max_length_m``) on beyond the hall they share with them
     (:func:`shared_rooms`; ``doors``: each room's neighbours) to a room without look-alikes;
     ``graph``: the places' :func:`leg_graph`, if built already."""
-    paired = {room for room, twins in lookalikes.items() if twins}
     graph = leg_graph(places) if graph is None else graph
     return {
         room
-        for room in paired
-        if rooms_with_routes_out(
-            places,
-            paired | shared_rooms(doors, room, lookalikes[room]),
-            max_length_m,
-            {room},
-            graph,
-        )
+        for room, twins in lookalikes.items()
+        if twins and route_beyond_m(graph, places, room, lookalikes, doors, max_length_m) < math.inf
     }
+
+
+def route_beyond_m(
+    graph: nx.Graph,
+    places: Sequence[Place],
+    room: str,
+    lookalikes: Mapping[str, frozenset[str]],
+    doors: Mapping[str, frozenset[str]],
+    max_length_m: float,
+) -> float:
+    """The length (metres) of the shortest recorded route (at most ``max_length_m``) from a
+    place of ``room`` on beyond the hall it shares with its look-alikes (``lookalikes``: each
+    room's; :func:`shared_rooms`, ``doors``: each room's neighbours) to a room without
+    look-alikes; inf if there is none. ``graph``: the places' :func:`leg_graph`."""
+    leave = {name for name, twins in lookalikes.items() if twins}
+    leave |= {room, *shared_rooms(doors, room, lookalikes.get(room, frozenset()))}
+    routes = (
+        route_out(graph, places, place.id, leave, max_length_m)
+        for place in places
+        if place.room == room
+    )
+    return min((route.length_m for route in routes if route is not None), default=math.inf)
 
 
 def rooms_with_routes_out(
