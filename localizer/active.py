@@ -38,7 +38,6 @@ from localizer.routes import (
     DriveFrame,
     Route,
     drive_route,
-    rooms_with_routes_beyond,
     route_beyond_m,
     route_into,
     route_out,
@@ -713,11 +712,12 @@ def _hall_check_alone(localizer: Localizer, room: str, route: Route, params: Act
     doors = partners_of(localizer.map.edges)
     if localizer.map.place(route.end).room not in shared_rooms(doors, room, twins):
         return False
-    places = localizer.map.places
-    beyond = rooms_with_routes_beyond(
-        places, localizer.lookalikes, doors, params.route_max_m, localizer.map.legs
+    graph, places, lookalikes = localizer.map.legs, localizer.map.places, localizer.lookalikes
+    return not any(
+        lookalikes.get(twin)
+        and route_beyond_m(graph, places, twin, lookalikes, doors, params.route_max_m) < math.inf
+        for twin in twins
     )
-    return not twins & beyond
 
 
 def _look_at_end(localizer: Localizer, robot: Robot, end: int) -> tuple[bool, float]:
