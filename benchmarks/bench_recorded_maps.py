@@ -26,8 +26,10 @@ seed 12). Session 18 (``--drive``, recorded routes) chose its rules on world see
 seeds 12 and 13 (record seeds 13, 14), and judged the last on seed 14 (record seed 15); the
 house of seeds 12-14 was not run. Sessions 19-23 used world seeds 15-26. Session 24 wrote
 its route-check and appearance rules looking at world seeds 26 and 27 (record seeds 27, 28) and
-judged them on seed 28, and its route-end rule on seed 29 (record seeds 29, 30). World seeds 30
-and up have not been looked at: the next change must be judged on them.
+judged them on seed 28, and its route-end rule on seed 29 (record seeds 29, 30). Sessions 25
+and 26 wrote their changes on world seeds 30, 31 and 33 and judged them on seed 34; session 27
+wrote its changes on seeds 31, 34 and 35 and judged them on seed 36 (record seeds one up).
+World seeds 37 and up have not been looked at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised

@@ -73,11 +73,13 @@ ENDINGS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class ActiveParams:
-    """``max_targets``: places the robot may drive to before it gives up; ``homing``: the
-    visual homing loop's settings. ``lost_looks``: while the belief is ``lost``, the robot
-    turns by ``lost_turn_deg``, drives ``lost_step_m`` and looks again, at most this many
-    times (a robot woken facing a bare wall or a doorway sees little; a step away it may see
-    its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a move, issue 19).
+    """``max_targets``: drives that tell something the robot may make before it gives up
+    (drives that told nothing count once there were as many: :func:`_drives_spent`);
+    ``homing``: the visual homing loop's settings. ``lost_looks``: while the belief is
+    ``lost``, the robot turns by ``lost_turn_deg``, drives ``lost_step_m`` and looks again, at
+    most this many times (a robot woken facing a bare wall or a doorway sees little; a step
+    away it may see its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a
+    move, issue 19).
     A look that matched a place with at least ``lost_home_min_inliers`` verified inliers, too
     few to tell a room, homes to that place first (each such place once): a robot woken far
     from its room's few stored places sees them faintly, and near one it sees its room (on
@@ -160,12 +162,16 @@ class ActiveParams:
 
 @dataclass(frozen=True)
 class Visit:
-    """One drive to a target place and the belief after looking there."""
+    """One drive to a target place and the belief after looking there; ``told``: whether the
+    drive told anything (False: a route check that could not start, or a drive to a place that
+    did not arrive and came back to where the robot had looked from; see
+    :func:`_drives_spent`)."""
 
     place_id: int
     room: str
     homing: HomingResult
     belief: RoomBelief
+    told: bool = True
 
 
 @dataclass(frozen=True)
@@ -181,7 +187,7 @@ class RouteCheck:
     views it took on the way out, or ``room``'s look-alike by a recorded route from ``end``),
     where the check was folded into the belief (unless an earlier check of the room came out
     the same, see :func:`_check_route`); None: it did not, and the belief started afresh or
-    was kept."""
+    was kept. ``started``: homing to ``start`` arrived and the route was driven."""
 
     room: str
     start: int
@@ -191,6 +197,7 @@ class RouteCheck:
     end_inliers: float = 0.0
     end_homing_m: float = 0.0
     back_room: str | None = None
+    started: bool = True
 
 
 @dataclass(frozen=True)
@@ -260,7 +267,7 @@ def localize_actively(
 
     go = home or drive_to
     localizer.reset()
-    observation = localizer.observe(robot.capture().image)
+    observation = _look(localizer, robot)
     belief = localizer.update(observation)
     first, frames, distance = belief, 1, 0.0
     notify(belief)
@@ -293,7 +300,7 @@ def localize_actively(
                 distance += abs(moved.moved_m)
                 at_place = None
             localizer.predict(HOMING_STAY_PROBABILITY)
-            observation = replace(localizer.observe(robot.capture().image), at_place=at_place)
+            observation = _look(localizer, robot, at_place)
             belief = localizer.update(observation)
             frames += 1
             notify(belief)
@@ -305,11 +312,12 @@ def localize_actively(
             chosen,
             context,
             params.max_targets,
-            len(visits),
+            _drives_spent(visits, params.max_targets),
         )
         check = None
         twins = _top_two_alike(belief, localizer.lookalikes)
-        unsure = (target is None or twins) and _may_drive(belief, len(visits), params.max_targets)
+        spent = _drives_spent(visits, params.max_targets)
+        unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
         if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
             checked = Counter(done.room for done in checks)
             check = _route_to_check(localizer, belief, observation, tried_routes, checked, params)
@@ -328,36 +336,73 @@ def localize_actively(
             notify(belief)
             checks.append(done)
             end_room = localizer.map.place(route.end).room
-            visits.append(Visit(route.end, end_room, homing, belief))
+            visits.append(Visit(route.end, end_room, homing, belief, done.started))
             if homing.reason == CANCELLED:
                 ended = CANCELLED
                 break
             continue
         if target is None:
-            ended = _ending(belief, len(visits), params.max_targets)
+            ended = _ending(belief, _drives_spent(visits, params.max_targets), params.max_targets)
             break
         context = context.trying(target)
         for same_spot in localizer.same_spot_places(target):  # looked at from there already
             context = context.trying(same_spot)
         notify(localizer.belief(LocalizationState.HOMING))
+        stood_at = localizer.latest.at_place if localizer.latest is not None else None
         homing = go(target)
         frames += len(homing.lengths)
         distance += homing.distance_m
-        if homing.distance_m >= params.min_new_view_m:
+        looked_from: int | None = target
+        cancelled = homing.reason == CANCELLED
+        if not homing.arrived and not cancelled and stood_at is not None:
+            # back to the place the robot stood at, as a check that cannot start comes back:
+            # where the homing gave up may be another room (world seed 33's house, one place
+            # per room: 3 of 20 robots homed from bathroom_a toward bathroom_b's place gave up
+            # in the hall, and ended there while the belief was of bathroom_a)
+            back = go(stood_at)
+            frames += len(back.lengths)
+            distance += back.distance_m
+            looked_from = stood_at if back.arrived else None
+            cancelled = back.reason == CANCELLED
+        if looked_from == stood_at != target:
+            belief = localizer.belief()  # back where it looked last: the same view tells no more
+        elif homing.distance_m >= params.min_new_view_m:
             localizer.predict(HOMING_STAY_PROBABILITY)
-            observation = replace(localizer.observe(robot.capture().image), at_place=target)
+            observation = _look(localizer, robot, looked_from)
             belief = localizer.update(observation)
             frames += 1
         else:
             belief = localizer.belief()
         notify(belief)
-        visits.append(Visit(target, localizer.map.place(target).room, homing, belief))
-        if homing.reason == CANCELLED:
+        came_back = looked_from == stood_at != target
+        visits.append(
+            Visit(target, localizer.map.place(target).room, homing, belief, not came_back)
+        )
+        if cancelled:
             ended = CANCELLED
             break
     return ActiveResult(
         first, belief, tuple(visits), frames, distance, looks_elsewhere, ended, tuple(checks)
     )
+
+
+def _look(localizer: Localizer, robot: Robot, at_place: int | None = None) -> Observation:
+    """A frame captured where the robot stands, with the place it homed to (if any) and its
+    odometry (frames from one spot count once: :data:`localizer.localizer.SAME_VIEW_M`)."""
+    observation = localizer.observe(robot.capture().image)
+    return replace(observation, at_place=at_place, odometry=robot.odometry())
+
+
+def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:
+    """The drives of ``visits`` that count against ``max_targets``: those that told something.
+    Drives that told nothing (a check whose homing to its start place did not arrive, a drive
+    to a place that did not arrive, each tried once) spend the budget only once there have been
+    ``max_targets`` of them: on world seed 35's building (two places per room), 12 of 78
+    checks could not start (homing ``converged`` half a metre on, or went out into the
+    corridor), and 5 of the 7 robots that ended ambiguous at the drive limit had spent one to
+    three of their four drives so."""
+    told = sum(1 for visit in visits if visit.told)
+    return max_targets if len(visits) - told >= max_targets else told
 
 
 def _top_two_alike(belief: RoomBelief, lookalikes: Mapping[str, frozenset[str]]) -> bool:
@@ -385,7 +430,7 @@ def _to_confirm(
     the twin, ends elsewhere (a house recorded one place per room, world seed 21: two robots
     in bedroom_b homed to bedroom_a's place and ended sure of bedroom_a)."""
     room = belief.top[0]
-    if belief.state is LocalizationState.LOST or len(visits) >= max_targets:
+    if belief.state is LocalizationState.LOST or _drives_spent(visits, max_targets) >= max_targets:
         return False
     if not localizer.alone(room) or any(done.room == room for done in checks):
         return False
@@ -628,12 +673,21 @@ def _check_route(
     if homed_to is not None and latest is not None and latest.at_place == homed_to:
         observation = latest  # looked from this place already: the same view is no new evidence
     else:
-        observation = replace(localizer.observe(robot.capture().image), at_place=homed_to)
+        observation = _look(localizer, robot, homed_to)
         localizer.update(observation)
         frames += 1
-    end_homing_m = at_end.distance_m if at_end is not to_start else 0.0
+    started = at_end is not to_start  # the route was driven
+    end_homing_m = at_end.distance_m if started else 0.0
     check = RouteCheck(
-        start.room, start.id, route.end, confirmed, distance, end_inliers, end_homing_m, back_room
+        start.room,
+        start.id,
+        route.end,
+        confirmed,
+        distance,
+        end_inliers,
+        end_homing_m,
+        back_room,
+        started,
     )
     return check, frames, at_end, observation
 

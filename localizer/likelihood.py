@@ -194,15 +194,18 @@ class RatioLikelihood:
         room_inliers: np.ndarray,
         aliased: Sequence[Sequence[int]] = (),
         compared: Sequence[Sequence[int]] = (),
+        read: np.ndarray | None = None,
     ) -> np.ndarray:
         """Likelihood per room (sums to 1) from the best count per room, shape (N,); the rooms
         of each ``aliased`` group of look-alikes (room indices, :mod:`localizer.lookalikes`)
-        are weighed as equally likely, those of each ``compared`` group (read on
-        counterparts) at most :data:`MAX_TWIN_LOG_RATIO` apart (:func:`lookalike_log_ratios`)."""
+        are weighed as equally likely, those of each ``compared`` group at most
+        :data:`MAX_TWIN_LOG_RATIO` apart, as their counts ``read`` on counterparts (default:
+        ``room_inliers``) say (:func:`lookalike_log_ratios`)."""
         counts = _check_counts(room_inliers)
         if counts.max() < self.min_inliers:
             return np.full(counts.size, 1.0 / counts.size)
-        return softmax(lookalike_log_ratios(self.log_ratio(counts), aliased, compared))
+        read_ratios = None if read is None else self.log_ratio(_check_counts(read))
+        return softmax(lookalike_log_ratios(self.log_ratio(counts), aliased, compared, read_ratios))
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict (stored in the map)."""
@@ -625,19 +628,24 @@ def lookalike_log_ratios(
     log_ratios: np.ndarray,
     aliased: Sequence[Sequence[int]] = (),
     compared: Sequence[Sequence[int]] = (),
+    read: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per-room log ratios with each ``aliased`` group of look-alike rooms (room indices) at
     its best member's: the frame says the group is there as strongly as its best count says,
     and nothing about which of its rooms (their counts say which has a stored place nearer the
-    robot). In each ``compared`` group no room falls more than :data:`MAX_TWIN_LOG_RATIO`
-    below the group's best. Rooms in no group keep their log ratio."""
+    robot). In each ``compared`` group each room falls below the group's best by as much as
+    its log ratio ``read`` on counterparts falls below the reading's best (default
+    ``log_ratios``), at most :data:`MAX_TWIN_LOG_RATIO`: the reading says which twin, the best
+    count how strongly the group. Rooms in no group keep their log ratio."""
     out = np.array(log_ratios, dtype=float)
+    read = out.copy() if read is None else np.asarray(read, dtype=float)
     for group in aliased:
         members = list(group)
         out[members] = out[members].max()
     for group in compared:
         members = list(group)
-        out[members] = np.maximum(out[members], out[members].max() - MAX_TWIN_LOG_RATIO)
+        below = np.minimum(read[members].max() - read[members], MAX_TWIN_LOG_RATIO)
+        out[members] = out[members].max() - below
     return out
 
 

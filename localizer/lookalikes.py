@@ -20,7 +20,9 @@ pair the frame verified (one frame moves their odds by at most
 :data:`~localizer.likelihood.MAX_TWIN_LOG_RATIO`); where the frame has none, the group is
 **aliased** and its rooms are weighed as equally likely
 (:func:`localizer.likelihood.lookalike_log_ratios`): the counts say nothing about which twin it
-is, and the active loop must drive to a counterpart place.
+is, and the active loop must drive to a counterpart place. Counterparts recorded by hand stand
+a few decimetres apart; the localizer reads them only where the robot homed to one of them
+(:meth:`localizer.localizer.Localizer.frame_likelihood`).
 
 Pure core: numpy, no I/O.
 """
@@ -193,6 +195,7 @@ def twin_counts(
     *,
     count: str,
     at_place: int | None = None,
+    min_count: float = 0.0,
 ) -> tuple[np.ndarray, tuple[tuple[int, ...], ...]]:
     """The frame's best count per room (``counts``, order of ``rooms``) with each look-alike
     group read on counterparts, and the groups that stay aliased.
@@ -202,7 +205,12 @@ def twin_counts(
     verified in ``evidence``, are candidates; the one with the highest count (``count``, see
     :func:`~localizer.likelihood.place_count`) gives its room its count and every other room of
     the group its counterpart's. A group without a candidate keeps its counts and is returned
-    as aliased.
+    as aliased, as is a group whose best reading falls below ``min_count`` (the model's
+    ``min_inliers``): counts at chance on a counterpart pair say nothing about which twin it is
+    (world seed 34's building: robots in office_a near its door verified office_b at 14 spread
+    inliers and the corridor at 7; the offices' one counterpart pair read 1.8 against 0.5).
+    The counts read say which twin; how strongly the frame shows the group against the other
+    rooms stays its best count's (:func:`localizer.likelihood.lookalike_log_ratios`).
 
     ``at_place``: the place the robot homed to before this frame. Homing stops where that
     place's view is matched best, so its count there beats its counterpart's by however far the
@@ -241,7 +249,7 @@ def twin_counts(
                     continue
                 if best is None or read[member] > best[0]:
                     best = (read[member], read)
-        if best is None:
+        if best is None or best[0] < min_count:
             aliased.append(tuple(group))
             continue
         for member, value in best[1].items():

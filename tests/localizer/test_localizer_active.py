@@ -268,3 +268,48 @@ def test_only_likely_rooms_are_checked_by_a_route(localizer):
     localizer.reset()
     belief = localizer.update_rooms({"office_a": 100.0})
     assert rooms_to_check(belief, {"office_a": 1}) == ["office_a"]
+
+
+def test_a_drive_that_gives_up_brings_the_robot_back_to_where_it_looked(localizer):
+    """A robot in office_a whose homing to places of other rooms drives off and gives up goes
+    back to the place it last looked from, not left where the homing gave up."""
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+    calls: list[int] = []
+
+    def home(place_id: int) -> HomingResult:
+        calls.append(place_id)
+        goal = localizer.map.fingerprint(place_id)
+        if localizer.map.place(place_id).room != "office_a":
+            moved = robot.move(np.pi / 2, 0.8)
+            return HomingResult(False, 1, abs(moved.moved_m), "max_steps", goal)
+        return drive_home(robot, goal, localizer.extract, ActiveParams().homing)
+
+    result = localize_actively(localizer, robot, "separating", home=home)
+    gave_up = [
+        k for k, place_id in enumerate(calls) if localizer.map.place(place_id).room != "office_a"
+    ]
+    assert gave_up and gave_up[0] > 0, "a drive after a first arrival must give up"
+    for k in gave_up:
+        assert calls[k + 1] == calls[k - 1]  # back where it looked from
+    assert robot.true_room() == "office_a"
+    assert result.distance_m == pytest.approx(robot.distance_driven_m, abs=1e-6)
+
+
+def test_drives_that_told_nothing_leave_the_budget_to_drives_that_tell(localizer):
+    """Drives to office_b's places give up and come back: they do not spend the two drives
+    allowed, so the robot drives more than twice, and at most twice to any purpose."""
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+
+    def home(place_id: int) -> HomingResult:
+        goal = localizer.map.fingerprint(place_id)
+        if localizer.map.place(place_id).room != "office_a":
+            moved = robot.move(np.pi / 2, 0.8)
+            return HomingResult(False, 1, abs(moved.moved_m), "max_steps", goal)
+        return drive_home(robot, goal, localizer.extract, ActiveParams().homing)
+
+    params = ActiveParams(max_targets=2)
+    result = localize_actively(localizer, robot, "separating", params, home=home)
+    told = [visit for visit in result.visits if visit.told]
+    assert len(result.visits) > params.max_targets >= len(told)
+    assert all(not visit.homing.arrived for visit in result.visits if not visit.told)
+    assert result.ended == "drive-limit"

@@ -230,3 +230,87 @@ def test_a_frame_where_the_robot_homed_to_a_place_of_a_room_of_two_is_read_in_fu
         localizer.frame_likelihood(with_field(frame, at_place=2)),
         localizer.frame_likelihood(frame),
     )
+
+
+def seen_at(localizer: Localizer, x_m: float, y_m: float):
+    """The cellar frame of :func:`frame_seeing`, captured at odometry ``(x_m, y_m)``."""
+    return replace(frame_seeing(localizer, 2, "cellar", 0.9), odometry=Pose2D(x_m, y_m, 0.0))
+
+
+def test_a_frame_from_the_spot_of_the_latest_replaces_its_evidence():
+    localizer = Localizer(one_and_two_place_map())
+    once = localizer.update(seen_at(localizer, 0.0, 0.0)).as_dict()
+    again = localizer.update(seen_at(localizer, 0.2, 0.1)).as_dict()  # 0.22 m on
+    assert again == pytest.approx(once)
+
+
+def test_a_frame_from_elsewhere_adds_its_evidence_to_the_latest():
+    localizer = Localizer(one_and_two_place_map())
+    once = localizer.update(seen_at(localizer, 0.0, 0.0)).as_dict()
+    twice = localizer.update(seen_at(localizer, 1.0, 0.0)).as_dict()
+    assert twice["cellar"] > once["cellar"]
+    assert twice["attic"] / twice["cellar"] == pytest.approx((once["attic"] / once["cellar"]) ** 2)
+
+
+def test_frames_of_unknown_odometry_each_add_their_evidence():
+    localizer = Localizer(one_and_two_place_map())
+    frame = frame_seeing(localizer, 2, "cellar", 0.9)
+    once = localizer.update(frame).as_dict()
+    twice = localizer.update(frame).as_dict()
+    assert twice["attic"] / twice["cellar"] == pytest.approx((once["attic"] / once["cellar"]) ** 2)
+
+
+def test_after_a_check_is_folded_in_a_frame_from_the_same_spot_adds_its_evidence():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.update(seen_at(localizer, 0.0, 0.0))
+    checked = localizer.update_rooms({"cellar": 3.0}).as_dict()
+    then = localizer.update(seen_at(localizer, 0.0, 0.0)).as_dict()
+    assert then["cellar"] > checked["cellar"]
+
+
+def twin_offices_map() -> LoadedMap:
+    """office_a's places 1 and 2, office_b's 3 and 4: 1 and 3 on one spot of the twins'
+    frames (one view), 2 and 4 counterparts that stand apart (two views)."""
+    rng = np.random.default_rng(1)
+    images = [rng.integers(0, 256, (64, 256), dtype=np.uint8) for _ in range(3)]
+    fingerprints = [extract_with_camera(images[i], CameraSpec(), "sift") for i in (0, 1, 0, 2)]
+    rooms = ["office_a", "office_a", "office_b", "office_b"]
+    table = FingerprintTable.stack("sift", [1, 2, 3, 4], rooms, fingerprints)
+    places = tuple(Place(i, room) for i, room in zip([1, 2, 3, 4], rooms, strict=True))
+    model = RatioLikelihood(
+        lookalikes=(("office_a", "office_b"),), counterparts=((1, 3), (2, 4))
+    ).to_json()
+    snapshot = MapSnapshot(Path("m"), table, places, ("office_a", "office_b"), (), model)
+    return LoadedMap.from_snapshot(snapshot)
+
+
+def frame_on(localizer: Localizer, counts: dict[int, int], at_place: int | None = None):
+    """An observation whose evidence is ``counts`` (place id: inliers, over the horizon)."""
+    from localizer.evidence import PlaceEvidence, QueryEvidence
+    from localizer.localizer import Observation
+
+    items = tuple(
+        PlaceEvidence(i, localizer.map.place(i).room, n, n, 0.0, np.zeros((n, 2), np.int64), 1.0)
+        for i, n in counts.items()
+    )
+    return Observation(localizer.map.fingerprint(1), QueryEvidence(items, {}), {}, at_place)
+
+
+def test_twins_are_read_on_counterparts_on_one_spot_wherever_the_frame_was_taken():
+    localizer = Localizer(twin_offices_map())
+    a, b = localizer.frame_likelihood(frame_on(localizer, {1: 60, 3: 120}))
+    assert b > 2 * a
+
+
+def test_counterparts_that_stand_apart_are_not_read_from_elsewhere():
+    # 4 stands nearer the robot than 2 does: that says nothing about which office it is in
+    localizer = Localizer(twin_offices_map())
+    a, b = localizer.frame_likelihood(frame_on(localizer, {2: 60, 4: 120}))
+    assert a == pytest.approx(b)
+
+
+def test_counterparts_that_stand_apart_are_read_where_the_robot_homed_to_one():
+    # homed to office_a's 2, yet office_b's 4 explains the frame better: against the offset
+    localizer = Localizer(twin_offices_map())
+    a, b = localizer.frame_likelihood(frame_on(localizer, {2: 60, 4: 120}, at_place=2))
+    assert b > 2 * a

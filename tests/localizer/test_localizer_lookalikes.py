@@ -574,3 +574,43 @@ def test_rooms_of_one_place_joined_by_a_door_never_stand_out_as_look_alikes():
     door = [("bedroom_a", "bedroom_b")]
     samples = CalibrationSamples.from_queries(ONE_PLACE_BEDROOMS, ONE_PLACE_HOUSE, edges=door)
     assert samples.lookalike_pairs == ()
+
+
+def test_twins_read_on_a_counterpart_pair_at_chance_stay_aliased():
+    # robot in office_a near its door: office_b's nearest place verified 14, the one
+    # counterpart pair (3, 13) only 2 and 1: chance, which says nothing about which twin
+    evidence = [Score(12, "office_b", 14), Score(0, "corridor", 7), Score(3, "office_a", 2)]
+    evidence.append(Score(13, "office_b", 1))
+    counts = room_inliers(evidence, ROOMS, count="inliers")
+    read, aliased = twin_counts(
+        evidence, ROOMS, counts, OFFICES, partners_of([(3, 13)]), count="inliers", min_count=6
+    )
+    assert aliased == OFFICES
+    assert list(read) == list(counts)
+
+
+def test_twins_read_on_counterparts_keep_the_group_as_likely_as_its_best_count():
+    # the reading (40 against 30) says which office; office_b's nearer place (140) says how
+    # strongly the frame shows an office against the corridor seen through the door (12)
+    model = RatioLikelihood()
+    counts = np.array([12.0, 40.0, 140.0, 0.0, 0.0, 0.0])
+    read = np.array([12.0, 40.0, 30.0, 0.0, 0.0, 0.0])
+    likelihood = model.from_counts(counts, compared=OFFICES, read=read)
+    plain = model.from_counts(counts)
+    assert likelihood[1] == pytest.approx(likelihood.max())
+    assert likelihood[1] / likelihood[0] == pytest.approx(plain[2] / plain[0], rel=1e-9)
+    assert likelihood[2] < likelihood[1]
+
+
+@given(
+    logs=st.lists(st.floats(-25, 25), min_size=4, max_size=4),
+    read=st.lists(st.floats(-25, 25), min_size=4, max_size=4),
+)
+def test_a_compared_group_stands_at_its_best_and_its_rooms_at_most_the_cap_below(logs, read):
+    out = lookalike_log_ratios(np.array(logs), compared=((0, 2, 3),), read=np.array(read))
+    group = [out[0], out[2], out[3]]
+    assert max(group) == max(logs[0], logs[2], logs[3])
+    assert min(group) >= max(group) - MAX_TWIN_LOG_RATIO - 1e-9
+    assert out[1] == logs[1]
+    members = [0, 2, 3]
+    assert out[members[int(np.argmax([read[m] for m in members]))]] == max(group)

@@ -89,6 +89,7 @@ class Trial:
             "steps": len(self.result.visits),
             "visited": [v.place_id for v in self.result.visits],
             "homing": [v.homing.reason for v in self.result.visits],
+            "told": [v.told for v in self.result.visits],
             "distance_m": self.result.distance_m,
             "frames": self.result.frames,
             "looks_elsewhere": self.result.looks_elsewhere,
@@ -102,6 +103,7 @@ class Trial:
                     "end_inliers": c.end_inliers,
                     "end_homing_m": c.end_homing_m,
                     "back_room": c.back_room,
+                    "started": c.started,
                 }
                 for c in self.result.checks
             ],
