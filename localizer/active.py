@@ -305,6 +305,7 @@ def localize_actively(
             frames += 1
             notify(belief)
             continue
+        spent = _drives_spent(visits, params.max_targets)
         target = active_step(
             belief,
             observation.evidence.places,
@@ -312,11 +313,10 @@ def localize_actively(
             chosen,
             context,
             params.max_targets,
-            _drives_spent(visits, params.max_targets),
+            spent,
         )
         check = None
         twins = _top_two_alike(belief, localizer.lookalikes)
-        spent = _drives_spent(visits, params.max_targets)
         unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
         if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
             checked = Counter(done.room for done in checks)
@@ -342,7 +342,7 @@ def localize_actively(
                 break
             continue
         if target is None:
-            ended = _ending(belief, _drives_spent(visits, params.max_targets), params.max_targets)
+            ended = _ending(belief, spent, params.max_targets)
             break
         context = context.trying(target)
         for same_spot in localizer.same_spot_places(target):  # looked at from there already

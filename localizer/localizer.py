@@ -410,11 +410,8 @@ class Localizer:
         on less than :data:`~localizer.lookalikes.EXACT_COUNTERPART_SHARE`), else None."""
         if place_id is None or place_id not in self.counterparts:
             return None
-        keypoints = self.map.keypoints(place_id)
-        for partner in self.counterparts[place_id]:
-            if self._pair_inliers(place_id, partner) < EXACT_COUNTERPART_SHARE * keypoints:
-                return place_id
-        return None
+        apart = self.counterparts[place_id] - set(self.same_spot_places(place_id))
+        return place_id if apart else None
 
     def update(self, observation: Observation) -> RoomBelief:
         """Fold an observation into the belief (Bayes update) and return the new belief. A
