@@ -29,6 +29,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import replace
 from typing import Any
 
 from localizer.active import ActiveParams, ActiveResult, localize_actively
@@ -115,6 +116,7 @@ class LocalizationRunner:
         self.robot = StoppableRobot(robot, self._stopping)
         self.max_pending = max_pending
         self._pending = 0
+        self._no_odometry = False  # the robot gave none once: passive looks go without
         self._pending_lock = threading.Lock()
         self.policy = policy
         self.params = params or ActiveParams()
@@ -202,12 +204,31 @@ class LocalizationRunner:
                 summary = active_summary(result)
             else:
                 observation = localizer.observe(self.robot.capture().image)
-                belief = localizer.update(observation)
+                odometry = self._odometry()
+                belief = localizer.update(replace(observation, odometry=odometry))
             self._set(belief)
             _log_localization(belief, time.monotonic() - start_s, summary)
             return self.belief() | ({"active": summary} if summary is not None else {})
         finally:
             self._run_lock.release()
+
+    def _odometry(self) -> Pose2D | None:
+        """The robot's odometry for a passive look, by which requests from one spot count once
+        (:data:`localizer.localizer.SAME_VIEW_M`). None from a robot that gave none (a camera
+        alone on the bus: its odometry query times out), which is logged and not asked again;
+        its frames then each add their evidence, as the active loop's never do."""
+        if self._no_odometry:
+            return None
+        try:
+            return self.robot.odometry()
+        except Exception as error:  # any base fault: the look goes on without
+            self._no_odometry = True
+            _log.warning(
+                "no odometry from the robot (%s): passive localizations from one spot will "
+                "each add their evidence",
+                error,
+            )
+            return None
 
     @contextmanager
     def driving(self) -> Iterator[StoppableRobot]:

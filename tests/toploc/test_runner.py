@@ -4,6 +4,7 @@ and ``toploc demo`` end to end on the small rendered map."""
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import shutil
 import threading
@@ -100,6 +101,36 @@ def test_an_active_localize_replies_how_it_went_beside_its_belief(loaded):
     assert set(reply["active"]) == {"drives", "distance_m", "ended"}
     assert reply["active"]["ended"] in ENDINGS
     assert "active" not in runner.belief()
+
+
+class NoOdometryRobot(RobotWrapper):
+    """A camera on the bus without a base: its odometry query times out."""
+
+    asked = 0
+
+    def odometry(self):
+        self.asked += 1
+        raise TimeoutError("no reply on toploc/test/base/odom")
+
+
+def test_passive_localizations_from_one_spot_count_as_one_look(loaded):
+    runner = LocalizationRunner(Localizer(loaded), robot_in("office_b", 2.5, 2.5))
+    first = runner.localize(active=False)
+    for _ in range(3):  # a client asking again and again while the robot stands still
+        again = runner.localize(active=False)
+    assert first["state"] == again["state"] == "ambiguous"
+    assert again["rooms"]["office_b"] == pytest.approx(first["rooms"]["office_b"], abs=0.02)
+
+
+def test_a_robot_without_odometry_localizes_passively_and_is_asked_once(loaded, caplog):
+    robot = NoOdometryRobot(robot_in("kitchen", 2.0, 3.0))
+    runner = LocalizationRunner(Localizer(loaded), robot)
+    with caplog.at_level(logging.WARNING, logger="toploc.runner"):
+        runner.localize(active=False)
+        belief = runner.localize(active=False)
+    assert max(belief["rooms"], key=belief["rooms"].get) == "kitchen"
+    assert robot.asked == 1
+    assert "no odometry from the robot" in caplog.text
 
 
 def test_belief_answers_and_reset_is_refused_while_a_localization_runs(loaded):
