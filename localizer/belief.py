@@ -34,15 +34,23 @@ BELIEF_SCHEMA = 1
 
 
 def transition_matrix(
-    rooms: Sequence[str], edges: Iterable[tuple[str, str]], stay_probability: float
+    rooms: Sequence[str],
+    edges: Iterable[tuple[str, str]],
+    stay_probability: float,
+    anywhere_probability: float = 0.0,
 ) -> np.ndarray:
     """Row-stochastic matrix ``T[i, j] = P(room j after a move | room i before)``.
 
     A room keeps ``stay_probability`` and shares the rest equally among its graph neighbours
-    (edges are undirected); a room without neighbours keeps everything.
+    (edges are undirected); a room without neighbours keeps everything. With
+    ``anywhere_probability`` the robot may also have gone to any room, the graph
+    notwithstanding (driven through several rooms, carried, or through a door the map does not
+    hold): each row is that share of the uniform distribution and the rest of the graph's.
     """
     if not 0.0 <= stay_probability <= 1.0:
         raise ValueError(f"stay_probability must be in [0, 1], got {stay_probability}")
+    if not 0.0 <= anywhere_probability <= 1.0:
+        raise ValueError(f"anywhere_probability must be in [0, 1], got {anywhere_probability}")
     index = _room_index(rooms)
     adjacency = np.zeros((len(index), len(index)), dtype=bool)
     for room_a, room_b in edges:
@@ -56,7 +64,7 @@ def transition_matrix(
     has_exit = degree > 0
     transition[has_exit] = adjacency[has_exit] * ((1.0 - stay_probability) / degree[has_exit, None])
     np.fill_diagonal(transition, np.where(has_exit, stay_probability, 1.0))
-    return transition
+    return (1.0 - anywhere_probability) * transition + anywhere_probability / len(index)
 
 
 def predict_on_graph(belief: np.ndarray, transition: np.ndarray) -> np.ndarray:
@@ -122,16 +130,24 @@ class BeliefFilter:
             raise ValueError(f"prior weights are all zero: {dict(prior)}")
         self._belief = fp_normalize(weights / weights.max())  # huge weights would sum to inf
 
-    def predict(self, stay_probability: float | None = None) -> np.ndarray:
+    def predict(
+        self, stay_probability: float | None = None, anywhere_probability: float = 0.0
+    ) -> np.ndarray:
         """Spread the belief along the graph after a move; returns the new belief.
 
         ``stay_probability`` overrides the filter's value for this move only (e.g. closer to 1
-        for a short move inside a room).
+        for a short move inside a room); ``anywhere_probability``: the share of the belief
+        that may have gone to any room (see :func:`transition_matrix`).
         """
         transition = (
             self.transition
-            if stay_probability is None
-            else transition_matrix(self.rooms, self.edges, stay_probability)
+            if stay_probability is None and anywhere_probability == 0.0
+            else transition_matrix(
+                self.rooms,
+                self.edges,
+                self.stay_probability if stay_probability is None else stay_probability,
+                anywhere_probability,
+            )
         )
         self._belief = fp_normalize(predict_on_graph(self._belief, transition))
         return self.probabilities

@@ -450,9 +450,18 @@ class Localizer:
         self._before_latest = None  # a frame after this adds to it, whatever the spot
         return self.belief()
 
-    def predict(self, stay_probability: float | None = None) -> None:
-        """The robot moved: spread the belief along the room graph."""
-        self.filter.predict(stay_probability)
+    def predict(
+        self, stay_probability: float | None = None, anywhere_probability: float = 0.0
+    ) -> None:
+        """The robot moved: spread the belief along the room graph, and a share of it
+        (``anywhere_probability``) over all rooms (:func:`localizer.belief.transition_matrix`)."""
+        self.filter.predict(stay_probability, anywhere_probability)
+
+    def moved_since_latest(self, observation: Observation) -> bool:
+        """Whether the robot may have moved since the latest frame folded in: there is one,
+        and ``observation`` was not taken within :data:`SAME_VIEW_M` of it (without odometry
+        on either, it cannot tell, and says it may have)."""
+        return self.latest is not None and not self._same_view(observation)
 
     def reset(self, prior: Mapping[str, float] | None = None) -> RoomBelief:
         """Uniform belief (global localization), or ``prior`` (``{room: weight}``)."""

@@ -41,6 +41,13 @@ from localizer.visual_homing import HomingResult
 RESET_WAIT_S = 1.0
 _log = logging.getLogger(__name__)
 POLL_S = 0.1  # how often a waiting localization looks at its deadline and at stop()
+PASSIVE_ANYWHERE_PROBABILITY = 0.05
+"""Between two passive localizations from different spots (or from a robot without odometry)
+the robot moved: the belief is spread along the room graph (stay 0.8) and this share of it over
+every room, as the robot may have been driven through several rooms, carried, or taken
+through a door the map does not hold (a map of photos has no doors at all). Without it a
+belief of 1.000 in the kitchen outlived a drive into the corridor and the seminar room on
+the demo's map, for 3 of 4 robots (``docs/results.md``, session 28)."""
 
 
 class LocalizationStoppedError(RuntimeError):
@@ -179,7 +186,10 @@ class LocalizationRunner:
 
     def localize(self, active: bool, deadline_s: float | None = None) -> dict[str, Any]:
         """Capture and update the belief; with ``active``, start from a uniform belief and drive
-        to disambiguate while it is ambiguous (this takes a while).
+        to disambiguate while it is ambiguous (this takes a while). Without, one frame: the
+        belief is first spread if the robot moved since the latest frame
+        (:data:`PASSIVE_ANYWHERE_PROBABILITY`), and a frame from the latest one's spot
+        replaces it (:data:`localizer.localizer.SAME_VIEW_M`).
 
         ``deadline_s`` (``time.monotonic()``): when the client stops waiting; a localization
         still waiting for its turn then is dropped (:class:`LocalizationDroppedError`).
@@ -204,8 +214,10 @@ class LocalizationRunner:
                 summary = active_summary(result)
             else:
                 observation = localizer.observe(self.robot.capture().image)
-                odometry = self._odometry()
-                belief = localizer.update(replace(observation, odometry=odometry))
+                observation = replace(observation, odometry=self._odometry())
+                if localizer.moved_since_latest(observation):
+                    localizer.predict(anywhere_probability=PASSIVE_ANYWHERE_PROBABILITY)
+                belief = localizer.update(observation)
             self._set(belief)
             _log_localization(belief, time.monotonic() - start_s, summary)
             return self.belief() | ({"active": summary} if summary is not None else {})

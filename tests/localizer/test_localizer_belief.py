@@ -132,6 +132,34 @@ def test_prediction_spreads_only_along_graph_edges():
     assert sum(after_two.values()) == pytest.approx(1.0)
 
 
+def test_a_share_of_the_belief_may_go_anywhere_the_graph_notwithstanding():
+    belief = BeliefFilter(ROOMS, EDGES, stay_probability=0.7)
+    belief.reset({"kitchen": 1.0})  # a room without doors
+    after = dict(zip(ROOMS, belief.predict(anywhere_probability=0.1), strict=True))
+    share = 0.1 / len(ROOMS)
+    assert after["kitchen"] == pytest.approx(0.9 + share)
+    assert all(after[room] == pytest.approx(share) for room in ROOMS if room != "kitchen")
+
+
+@given(
+    st.integers(1, 8),
+    st.floats(0.0, 1.0),
+    st.floats(0.0, 1.0),
+    st.integers(0, 2**32 - 1),
+)
+def test_a_prediction_with_a_share_anywhere_matches_the_naive_loop_mixed_with_the_uniform(
+    n, stay, anywhere, seed
+):
+    rng = np.random.default_rng(seed)
+    rooms = [f"r{i}" for i in range(n)]
+    edges = [(rooms[i], rooms[j]) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.4]
+    belief = rng.dirichlet(np.ones(n))
+    fast = predict_on_graph(belief, transition_matrix(rooms, edges, stay, anywhere))
+    naive = (1 - anywhere) * naive_predict(belief, rooms, edges, stay) + anywhere / n
+    np.testing.assert_allclose(fast, naive, atol=1e-12)
+    assert fast.sum() == pytest.approx(1.0)
+
+
 def test_stay_probability_override_is_for_one_move_only():
     belief = BeliefFilter(ROOMS, EDGES, stay_probability=0.5)
     belief.reset({"lab": 1.0})
@@ -144,6 +172,8 @@ def test_transition_rejects_unknown_rooms_and_bad_stay():
         transition_matrix(ROOMS, [("lab", "attic")], 0.8)
     with pytest.raises(ValueError, match="stay_probability"):
         transition_matrix(ROOMS, EDGES, 1.2)
+    with pytest.raises(ValueError, match="anywhere_probability"):
+        transition_matrix(ROOMS, EDGES, 0.8, -0.1)
     with pytest.raises(ValueError, match="unique"):
         BeliefFilter(["lab", "lab"])
 

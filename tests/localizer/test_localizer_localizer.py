@@ -260,6 +260,15 @@ def test_frames_of_unknown_odometry_each_add_their_evidence():
     assert twice["attic"] / twice["cellar"] == pytest.approx((once["attic"] / once["cellar"]) ** 2)
 
 
+def test_the_robot_may_have_moved_since_a_frame_from_elsewhere_or_of_unknown_odometry():
+    localizer = Localizer(one_and_two_place_map())
+    assert not localizer.moved_since_latest(seen_at(localizer, 0.0, 0.0))  # no frame yet
+    localizer.update(seen_at(localizer, 0.0, 0.0))
+    assert not localizer.moved_since_latest(seen_at(localizer, 0.2, 0.1))
+    assert localizer.moved_since_latest(seen_at(localizer, 1.0, 0.0))
+    assert localizer.moved_since_latest(frame_seeing(localizer, 2, "cellar", 0.9))
+
+
 def test_after_a_check_is_folded_in_a_frame_from_the_same_spot_adds_its_evidence():
     localizer = Localizer(one_and_two_place_map())
     localizer.update(seen_at(localizer, 0.0, 0.0))

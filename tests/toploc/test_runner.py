@@ -122,6 +122,32 @@ def test_passive_localizations_from_one_spot_count_as_one_look(loaded):
     assert again["rooms"]["office_b"] == pytest.approx(first["rooms"]["office_b"], abs=0.02)
 
 
+class Walker(RobotWrapper):
+    """Stands in one room, then in another ``moved_m`` on by odometry (it does not drive)."""
+
+    def __init__(self, first: SimulatedRobot, then: SimulatedRobot, moved_m: float) -> None:
+        super().__init__(first)
+        self.then, self.moved_m, self.walked = then, moved_m, False
+
+    def walk(self) -> None:
+        self.robot, self.walked = self.then, True
+
+    def odometry(self):
+        return Pose2D(self.moved_m if self.walked else 0.0, 0.0, 0.0)
+
+
+def test_passive_localizations_follow_a_robot_that_went_on_into_another_room(loaded):
+    robot = Walker(robot_in("kitchen", 2.0, 3.0), robot_in("corridor", 1.5, 2.0), moved_m=4.0)
+    runner = LocalizationRunner(Localizer(loaded), robot)
+    runner.localize(active=False)
+    before = runner.localize(active=False)
+    robot.walk()  # out of the kitchen's door
+    after = runner.localize(active=False)
+    assert before["state"] == "localized" and before["rooms"]["kitchen"] > 0.99
+    assert after["state"] == "localized"
+    assert max(after["rooms"], key=after["rooms"].get) == "corridor"
+
+
 def test_a_robot_without_odometry_localizes_passively_and_is_asked_once(loaded, caplog):
     robot = NoOdometryRobot(robot_in("kitchen", 2.0, 3.0))
     runner = LocalizationRunner(Localizer(loaded), robot)

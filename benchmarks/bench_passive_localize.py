@@ -1,0 +1,168 @@
+"""Benchmark: passive localizations, as a client asks the service again and again.
+
+A ROS 2 node calling ``/toploc/localize`` in a loop, on the demo's map (rendered
+``building``, built in ``~/.cache/toploc`` first if it is missing); the service's runner
+(:class:`toploc.runner.LocalizationRunner`) answers each request with one frame.
+
+- ``still``: the robot is kidnapped (seeded, as ``toploc sim kidnap``) into each of the two
+  look-alike offices and stays there; ``--requests`` requests each. Frames carry the robot's
+  odometry, so frames from one spot count once (``localizer.localizer.SAME_VIEW_M``); with
+  ``--no-odometry`` the robot gives none (a camera alone on the bus) and every frame adds its
+  evidence. Prints, per request, how many answers were ``localized``, how many of those
+  named the wrong office, and the mean probability of the top room.
+- ``walk``: the robot stops in the kitchen twice, the corridor twice, the seminar room, the
+  storage room, the corridor and office_b, each stop at a seeded random spot of its room and
+  2 m on by odometry from the one before, and is asked once at each stop. Prints the five
+  outcomes over all stops (right and localized, right but ambiguous, wrong and localized,
+  wrong and ambiguous, lost) and the stops whose answer was wrong and localized. With
+  ``--no-doors`` the map's room graph is left out, as a map built from photos has none.
+
+Run: ``python benchmarks/bench_passive_localize.py still [--trials 10] [--requests 8]
+[--no-odometry]`` or ``python benchmarks/bench_passive_localize.py walk [--trials 10]
+[--no-doors]``. The
+code before session 28 is measured by running this file with that code first on
+``PYTHONPATH``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+from collections import Counter
+from collections.abc import Sequence
+
+import numpy as np
+
+from localizer.localizer import LoadedMap, Localizer
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
+from mapdb.loading import load_snapshot
+from robot.worlds import make_world
+from toploc.maps import ensure_world_map, kidnapped_robot
+from toploc.runner import LocalizationRunner
+
+OFFICES = ("office_a", "office_b")
+WALK = ("kitchen", "kitchen", "corridor", "corridor", "seminar", "storage", "corridor", "office_b")
+STOP_M = 2.0  # odometric metres between two stops of the walk
+OUTCOMES = ("right, localized", "right, ambiguous", "WRONG, LOCALIZED", "wrong, ambiguous", "lost")
+
+
+class WithoutOdometry:
+    """``robot`` without odometry: its odometry query fails, as a camera's alone would."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+
+    def capture(self) -> Capture:
+        return self.robot.capture()
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        return self.robot.move(turn_rad, forward_m)
+
+    def odometry(self) -> Pose2D:
+        raise TimeoutError("this robot gives no odometry")
+
+    def stop(self) -> None:
+        self.robot.stop()
+
+
+class Walk:
+    """A robot that captures at its stops in turn (one robot standing at each) and whose
+    odometry says it went ``STOP_M`` on at each; it does not drive."""
+
+    def __init__(self, stops: Sequence[Robot]) -> None:
+        self.stops = stops
+        self.at = -1
+
+    def capture(self) -> Capture:
+        self.at += 1
+        return self.stops[self.at].capture()
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        raise RuntimeError("a passive walk does not drive")
+
+    def odometry(self) -> Pose2D:
+        return Pose2D(STOP_M * self.at, 0.0, 0.0)
+
+    def stop(self) -> None:
+        pass
+
+
+def outcome(belief: dict, room: str) -> str:
+    """The outcome (a name of :data:`OUTCOMES`) of a belief message for a robot in ``room``."""
+    if belief["state"] == "lost":
+        return OUTCOMES[4]
+    top = max(belief["rooms"], key=belief["rooms"].get)
+    localized = belief["state"] == "localized"
+    if top == room:
+        return OUTCOMES[0] if localized else OUTCOMES[1]
+    return OUTCOMES[2] if localized else OUTCOMES[3]
+
+
+def still(loaded: LoadedMap, args: argparse.Namespace) -> None:
+    db, world = args.db, make_world("building")
+    localized = np.zeros(args.requests, dtype=int)
+    wrong = np.zeros(args.requests, dtype=int)
+    top_p = np.zeros(args.requests)
+    for seed in range(args.trials):
+        for office in OFFICES:
+            robot: Robot = kidnapped_robot(world, office, seed, db)
+            if args.no_odometry:
+                robot = WithoutOdometry(robot)
+            runner = LocalizationRunner(Localizer(loaded), robot)
+            for k in range(args.requests):
+                belief = runner.localize(active=False)
+                top = max(belief["rooms"], key=belief["rooms"].get)
+                top_p[k] += belief["rooms"][top]
+                if belief["state"] == "localized":
+                    localized[k] += 1
+                    wrong[k] += top != office
+    trials = args.trials * len(OFFICES)
+    odometry = "without odometry" if args.no_odometry else "with odometry"
+    print(f"{trials} robots standing still in the demo map's offices, {odometry}")
+    print(f"{'request':>8} {'localized':>10} {'of them wrong':>14} {'mean top p':>11}")
+    for k in range(args.requests):
+        print(f"{k + 1:>8} {localized[k]:>10} {wrong[k]:>14} {top_p[k] / trials:>11.3f}")
+
+
+def walk(loaded: LoadedMap, args: argparse.Namespace) -> None:
+    db, world = args.db, make_world("building")
+    counts: Counter[str] = Counter()
+    sure_and_wrong = []
+    for seed in range(args.trials):
+        stops = [kidnapped_robot(world, room, 100 * seed + i, db) for i, room in enumerate(WALK)]
+        runner = LocalizationRunner(Localizer(loaded), Walk(stops))
+        for i, room in enumerate(WALK):
+            belief = runner.localize(active=False)
+            counts[outcome(belief, room)] += 1
+            if outcome(belief, room) == OUTCOMES[2]:
+                top = max(belief["rooms"], key=belief["rooms"].get)
+                sure_and_wrong.append(f"walk {seed} stop {i + 1} in {room}: {top}")
+    doors = "without its doors" if args.no_doors else "with its doors"
+    print(
+        f"{args.trials} walks of {len(WALK)} stops ({' > '.join(WALK)}), one request each; "
+        f"the map {doors}"
+    )
+    print(", ".join(f"{name} {counts[name]}" for name in OUTCOMES))
+    for line in sure_and_wrong:
+        print("  wrong and localized:", line)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("scenario", choices=("still", "walk"))
+    parser.add_argument("--trials", type=int, default=10, help="robots per office, or walks")
+    parser.add_argument("--requests", type=int, default=8, help="still: requests per robot")
+    parser.add_argument("--no-odometry", action="store_true", help="still: a robot without")
+    parser.add_argument("--no-doors", action="store_true", help="walk: a map without its graph")
+    args = parser.parse_args()
+    logging.getLogger("toploc.runner").setLevel(logging.ERROR)  # each robot's missing odometry
+    args.db = ensure_world_map("building")
+    loaded = LoadedMap.from_snapshot(load_snapshot(args.db))
+    if args.no_doors:
+        loaded = dataclasses.replace(loaded, edges=())
+    (still if args.scenario == "still" else walk)(loaded, args)
+
+
+if __name__ == "__main__":
+    main()
