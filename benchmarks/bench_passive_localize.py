@@ -7,19 +7,21 @@ A ROS 2 node calling ``/toploc/localize`` in a loop, on the demo's map (rendered
 - ``still``: the robot is kidnapped (seeded, as ``toploc sim kidnap``) into each of the two
   look-alike offices and stays there; ``--requests`` requests each. Frames carry the robot's
   odometry, so frames from one spot count once (``localizer.localizer.SAME_VIEW_M``); with
-  ``--no-odometry`` the robot gives none (a camera alone on the bus) and every frame adds its
-  evidence. Prints, per request, how many answers were ``localized``, how many of those
-  named the wrong office, and the mean probability of the top room.
+  ``--no-odometry`` the robot gives none (a camera alone on the bus), and the images say
+  whether two frames were taken on one spot (``localizer.visual_homing.same_spot``).
+  Prints, per request, how many answers were ``localized``, how many of those named the
+  wrong office, and the mean probability of the top room.
 - ``walk``: the robot stops in the kitchen twice, the corridor twice, the seminar room, the
   storage room, the corridor and office_b, each stop at a seeded random spot of its room and
   2 m on by odometry from the one before, and is asked once at each stop. Prints the five
   outcomes over all stops (right and localized, right but ambiguous, wrong and localized,
   wrong and ambiguous, lost) and the stops whose answer was wrong and localized. With
-  ``--no-doors`` the map's room graph is left out, as a map built from photos has none.
+  ``--no-doors`` the map's room graph is left out, as a map built from photos has none;
+  ``--no-odometry`` as above.
 
 Run: ``python benchmarks/bench_passive_localize.py still [--trials 10] [--requests 8]
 [--no-odometry]`` or ``python benchmarks/bench_passive_localize.py walk [--trials 10]
-[--no-doors]``. The
+[--no-doors] [--no-odometry]``. The
 code before session 28 is measured by running this file with that code first on
 ``PYTHONPATH``.
 """
@@ -131,7 +133,10 @@ def walk(loaded: LoadedMap, args: argparse.Namespace) -> None:
     sure_and_wrong = []
     for seed in range(args.trials):
         stops = [kidnapped_robot(world, room, 100 * seed + i, db) for i, room in enumerate(WALK)]
-        runner = LocalizationRunner(Localizer(loaded), Walk(stops))
+        walker: Robot = Walk(stops)
+        if args.no_odometry:
+            walker = WithoutOdometry(walker)
+        runner = LocalizationRunner(Localizer(loaded), walker)
         for i, room in enumerate(WALK):
             belief = runner.localize(active=False)
             counts[outcome(belief, room)] += 1
@@ -139,9 +144,10 @@ def walk(loaded: LoadedMap, args: argparse.Namespace) -> None:
                 top = max(belief["rooms"], key=belief["rooms"].get)
                 sure_and_wrong.append(f"walk {seed} stop {i + 1} in {room}: {top}")
     doors = "without its doors" if args.no_doors else "with its doors"
+    odometry = "without odometry" if args.no_odometry else "with odometry"
     print(
         f"{args.trials} walks of {len(WALK)} stops ({' > '.join(WALK)}), one request each; "
-        f"the map {doors}"
+        f"the map {doors}; {odometry}"
     )
     print(", ".join(f"{name} {counts[name]}" for name in OUTCOMES))
     for line in sure_and_wrong:
@@ -153,7 +159,7 @@ def main() -> None:
     parser.add_argument("scenario", choices=("still", "walk"))
     parser.add_argument("--trials", type=int, default=10, help="robots per office, or walks")
     parser.add_argument("--requests", type=int, default=8, help="still: requests per robot")
-    parser.add_argument("--no-odometry", action="store_true", help="still: a robot without")
+    parser.add_argument("--no-odometry", action="store_true", help="a robot without")
     parser.add_argument("--no-doors", action="store_true", help="walk: a map without its graph")
     args = parser.parse_args()
     logging.getLogger("toploc.runner").setLevel(logging.ERROR)  # each robot's missing odometry

@@ -35,6 +35,7 @@ from localizer.policy import PlaceSimilarity
 from localizer.retrieval import PlaceIndex, Shortlister
 from localizer.robot_protocol import Pose2D
 from localizer.routes import leg_graph
+from localizer.visual_homing import same_spot
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place, PlaceStore
 
 # From this many places (twice the default shortlist) the index pays: verifying all 30 places of
@@ -428,11 +429,15 @@ class Localizer:
         return self.belief()
 
     def _same_view(self, observation: Observation) -> bool:
-        """Whether ``observation`` was taken within :data:`SAME_VIEW_M` of the latest frame."""
-        here = observation.odometry
-        there = self.latest.odometry if self.latest is not None else None
-        if here is None or there is None:
+        """Whether ``observation`` was taken within :data:`SAME_VIEW_M` of the latest frame, by
+        their odometry; without odometry on either, whether the images say they were taken on
+        one spot (:func:`localizer.visual_homing.same_spot`: a camera alone, asked again and
+        again while it stands still)."""
+        if self.latest is None:
             return False
+        here, there = observation.odometry, self.latest.odometry
+        if here is None or there is None:
+            return same_spot(observation.fingerprint, self.latest.fingerprint)
         return float(np.hypot(here.x_m - there.x_m, here.y_m - there.y_m)) <= SAME_VIEW_M
 
     def update_rooms(self, likelihood: Mapping[str, float]) -> RoomBelief:

@@ -378,6 +378,21 @@ def _arrived(step: HomeStep, goal: Fingerprint, p: HomingParams) -> bool:
     return step.length < p.arrive_length and small_parallax and _goal_in_view(step, goal, p)
 
 
+def same_spot(here: Fingerprint, there: Fingerprint, params: HomingParams | None = None) -> bool:
+    """Whether the view ``here`` was taken where the view ``there`` was, by the images alone:
+    homing from ``here`` toward ``there`` would say it has arrived (a short home vector, little
+    parallax, most of ``there``'s features matched; see the module docstring). False where
+    the two views match too little to tell, or come from different detectors."""
+    params = params or HomingParams()
+    if here.detector != there.detector:
+        return False
+    try:
+        step = home_step(here, there, params.step)
+    except HomingError:
+        return False
+    return _arrived(step, there, params)
+
+
 def drive_home(
     robot: Robot,
     goal: Fingerprint,

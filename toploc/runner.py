@@ -228,7 +228,8 @@ class LocalizationRunner:
         """The robot's odometry for a passive look, by which requests from one spot count once
         (:data:`localizer.localizer.SAME_VIEW_M`). None from a robot that gave none (a camera
         alone on the bus: its odometry query times out), which is logged and not asked again;
-        its frames then each add their evidence, as the active loop's never do."""
+        whether its frames were taken on one spot is then told by the images
+        (:func:`localizer.visual_homing.same_spot`)."""
         if self._no_odometry:
             return None
         try:
@@ -236,8 +237,8 @@ class LocalizationRunner:
         except Exception as error:  # any base fault: the look goes on without
             self._no_odometry = True
             _log.warning(
-                "no odometry from the robot (%s): passive localizations from one spot will "
-                "each add their evidence",
+                "no odometry from the robot (%s): whether it moved between two passive "
+                "localizations is told by their images alone",
                 error,
             )
             return None

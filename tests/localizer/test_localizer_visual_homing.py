@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from localizer.visual_homing import (
     drive_home,
     grey_extractor,
     home_step,
+    same_spot,
     signed_pose_direction_rad,
 )
 from mapdb.records import Fingerprint
@@ -272,6 +274,34 @@ def test_drive_home_in_the_rendered_square_room(variant):
     end = robot.true_pose
     assert math.hypot(end.x_m - goal.x_m, end.y_m - goal.y_m) < 0.3, result
     assert result.arrived
+
+
+def _square_room_views(turn_rad: float, forward_m: float):
+    """Two 512 x 96 views of the rendered square room: one, and one after the robot turned by
+    ``turn_rad`` and drove ``forward_m``."""
+    extract = grey_extractor("sift")
+    robot = SimulatedRobot(
+        make_world("square", 0), Pose2D(2.5, 1.8, 0.4), camera=PanoramaCamera(512, 96), grey=True
+    )
+    first = extract(robot.capture().image)
+    robot.move(turn_rad, forward_m)
+    return first, extract(robot.capture().image)
+
+
+def test_a_view_turned_on_one_spot_is_told_to_be_from_that_spot():
+    first, turned = _square_room_views(1.0, 0.0)
+    assert same_spot(turned, first)
+
+
+def test_a_view_a_metre_on_is_not_from_the_same_spot():
+    first, moved = _square_room_views(0.0, 1.0)
+    assert not same_spot(moved, first)
+
+
+def test_views_of_different_detectors_are_not_told_to_be_from_one_spot():
+    view = LandmarkWorld(1).fingerprint(Pose2D(3.0, 3.0))
+    assert same_spot(view, view)
+    assert not same_spot(replace(view, detector="mser"), view)
 
 
 def _verification(yaw_rad: float, direction_rad: float) -> Verification:

@@ -148,6 +148,15 @@ def test_passive_localizations_follow_a_robot_that_went_on_into_another_room(loa
     assert max(after["rooms"], key=after["rooms"].get) == "corridor"
 
 
+def test_a_camera_without_odometry_asked_again_on_one_spot_counts_once(loaded):
+    runner = LocalizationRunner(Localizer(loaded), NoOdometryRobot(robot_in("office_b", 2.5, 2.5)))
+    first = runner.localize(active=False)
+    for _ in range(3):  # the images say the camera has not moved
+        again = runner.localize(active=False)
+    assert first["state"] == again["state"] == "ambiguous"
+    assert again["rooms"]["office_b"] == pytest.approx(first["rooms"]["office_b"], abs=0.02)
+
+
 def test_a_robot_without_odometry_localizes_passively_and_is_asked_once(loaded, caplog):
     robot = NoOdometryRobot(robot_in("kitchen", 2.0, 3.0))
     runner = LocalizationRunner(Localizer(loaded), robot)
