@@ -17,11 +17,12 @@ A ROS 2 node calling ``/toploc/localize`` in a loop, on the demo's map (rendered
   outcomes over all stops (right and localized, right but ambiguous, wrong and localized,
   wrong and ambiguous, lost) and the stops whose answer was wrong and localized. With
   ``--no-doors`` the map's room graph is left out, as a map built from photos has none;
-  ``--no-odometry`` as above.
+  ``--no-odometry`` as above; ``--anywhere P``: the share of the belief a passive frame of a
+  new view spreads over every room (``LocalizerConfig.passive_anywhere_probability``).
 
 Run: ``python benchmarks/bench_passive_localize.py still [--trials 10] [--requests 8]
 [--no-odometry]`` or ``python benchmarks/bench_passive_localize.py walk [--trials 10]
-[--no-doors] [--no-odometry]``. The
+[--no-doors] [--no-odometry] [--anywhere P]``. The
 code before session 28 is measured by running this file with that code first on
 ``PYTHONPATH``.
 """
@@ -36,7 +37,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from localizer.localizer import LoadedMap, Localizer
+from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from mapdb.loading import load_snapshot
 from robot.worlds import make_world
@@ -136,7 +137,8 @@ def walk(loaded: LoadedMap, args: argparse.Namespace) -> None:
         walker: Robot = Walk(stops)
         if args.no_odometry:
             walker = WithoutOdometry(walker)
-        runner = LocalizationRunner(Localizer(loaded), walker)
+        config = LocalizerConfig(passive_anywhere_probability=args.anywhere)
+        runner = LocalizationRunner(Localizer(loaded, config), walker)
         for i, room in enumerate(WALK):
             belief = runner.localize(active=False)
             counts[outcome(belief, room)] += 1
@@ -161,6 +163,12 @@ def main() -> None:
     parser.add_argument("--requests", type=int, default=8, help="still: requests per robot")
     parser.add_argument("--no-odometry", action="store_true", help="a robot without")
     parser.add_argument("--no-doors", action="store_true", help="walk: a map without its graph")
+    parser.add_argument(
+        "--anywhere",
+        type=float,
+        default=LocalizerConfig().passive_anywhere_probability,
+        help="walk: the share of the belief spread over every room",
+    )
     args = parser.parse_args()
     logging.getLogger("toploc.runner").setLevel(logging.ERROR)  # each robot's missing odometry
     args.db = ensure_world_map("building")

@@ -77,6 +77,10 @@ class LocalizerConfig:
     map's calibration, else :class:`~localizer.likelihood.RatioLikelihood`'s defaults); its
     ``min_inliers`` is also the ``lost`` test. ``extraction_threads``: a query panorama's halves
     are detected on this many threads (:func:`localizer.features.extract`; 1: one call).
+    ``passive_anywhere_probability``: a passive frame (:meth:`Localizer.update`) from a new
+    view first spreads the belief along the room graph and this share of it over every room:
+    between two requests the robot may have been driven through several rooms, carried, or
+    taken through a door the map does not hold (a map of photos has no doors at all).
     """
 
     detector: str = "sift"
@@ -87,10 +91,16 @@ class LocalizerConfig:
     use_index: bool | None = None
     camera: CameraSpec = field(default_factory=CameraSpec)
     extraction_threads: int = 2
+    passive_anywhere_probability: float = 0.05
 
     def __post_init__(self) -> None:
         if self.extraction_threads < 1:
             raise ValueError(f"extraction_threads must be >= 1, got {self.extraction_threads!r}")
+        if not 0.0 <= self.passive_anywhere_probability <= 1.0:
+            raise ValueError(
+                "passive_anywhere_probability must be in [0, 1], got "
+                f"{self.passive_anywhere_probability!r}"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,7 +237,9 @@ class Localizer:
         self.config = config or LocalizerConfig()
         self.latest: Observation | None = None
         self.doubted: frozenset[str] = frozenset()
-        self._before_latest: np.ndarray | None = None  # the belief the latest frame updated
+        # the first frame of the latest view and the belief before it: frames from its spot
+        # replace the evidence since, instead of adding to it
+        self._view: tuple[Observation, np.ndarray] | None = None
         self._use(loaded)
 
     def _use(self, loaded: LoadedMap) -> None:
@@ -257,7 +269,7 @@ class Localizer:
         share = 1.0 / len(loaded.rooms)
         prior = {room: old.get(room, share) for room in loaded.rooms}
         self.filter.reset(prior if sum(prior.values()) > 0 else None)
-        self._before_latest = None  # of the old map's rooms
+        self._view = None  # of the old map's rooms
         return self.belief()
 
     def extract(self, image: np.ndarray, source: str = "image") -> Fingerprint:
@@ -362,7 +374,7 @@ class Localizer:
             values = np.ones(len(probabilities))
             values[i] = others / probabilities[i]
             self.filter.update(values)
-            self._before_latest = None
+            self._view = None
         return self.belief()
 
     def _held_doubted(self, likelihood: np.ndarray) -> np.ndarray:
@@ -414,30 +426,37 @@ class Localizer:
         apart = self.counterparts[place_id] - set(self.same_spot_places(place_id))
         return place_id if apart else None
 
-    def update(self, observation: Observation) -> RoomBelief:
-        """Fold an observation into the belief (Bayes update) and return the new belief. A
-        frame taken within :data:`SAME_VIEW_M` of the latest one (by their ``odometry``), with
-        nothing else folded in between, replaces that frame's evidence: one view of a scene is
-        one piece of evidence, however often it is captured."""
+    def update(self, observation: Observation, passive: bool = False) -> RoomBelief:
+        """Fold an observation into the belief (Bayes update) and return the new belief.
+
+        A frame of the latest view (:meth:`_same_view`: taken on the spot of that view's first
+        frame), with nothing else folded in since, replaces the evidence of the view's frames
+        instead of adding to it: one view of a scene is one piece of evidence, however often
+        it is captured. ``passive``: the service's passive localizations, which do not know
+        how the robot moved: a frame of a new view, after an earlier frame, is folded in after
+        the belief is spread along the room graph and
+        :attr:`LocalizerConfig.passive_anywhere_probability` of it over every room (the
+        active loop spreads it itself, by the drives it makes)."""
         likelihood = self.frame_likelihood(observation)
-        if self._before_latest is not None and self._same_view(observation):
-            self.filter.reset(dict(zip(self.map.rooms, self._before_latest, strict=True)))
+        if self._view is not None and self._same_view(observation, self._view[0]):
+            self.filter.reset(dict(zip(self.map.rooms, self._view[1], strict=True)))
         else:
-            self._before_latest = self.filter.probabilities
+            if passive and self.latest is not None:
+                self.filter.predict(anywhere_probability=self.config.passive_anywhere_probability)
+            self._view = (observation, self.filter.probabilities)
         self.filter.update(likelihood)
         self.latest = observation
         return self.belief()
 
-    def _same_view(self, observation: Observation) -> bool:
-        """Whether ``observation`` was taken within :data:`SAME_VIEW_M` of the latest frame, by
-        their odometry; without odometry on either, whether the images say they were taken on
-        one spot (:func:`localizer.visual_homing.same_spot`: a camera alone, asked again and
-        again while it stands still)."""
-        if self.latest is None:
-            return False
-        here, there = observation.odometry, self.latest.odometry
+    @staticmethod
+    def _same_view(observation: Observation, first: Observation) -> bool:
+        """Whether ``observation`` was taken within :data:`SAME_VIEW_M` of ``first``, by their
+        odometry; without odometry on either, whether the images say they were taken on one
+        spot (:func:`localizer.visual_homing.same_spot`, a stricter test: about 0.1 m in the
+        rendered square room): a camera alone, asked again and again while it stands still."""
+        here, there = observation.odometry, first.odometry
         if here is None or there is None:
-            return same_spot(observation.fingerprint, self.latest.fingerprint)
+            return same_spot(observation.fingerprint, first.fingerprint)
         return float(np.hypot(here.x_m - there.x_m, here.y_m - there.y_m)) <= SAME_VIEW_M
 
     def update_rooms(self, likelihood: Mapping[str, float]) -> RoomBelief:
@@ -452,28 +471,19 @@ class Localizer:
         if not (np.all(np.isfinite(values)) and np.all(values >= 0)):
             raise ValueError(f"a room likelihood must be a finite number >= 0, got {likelihood}")
         self.filter.update(values)
-        self._before_latest = None  # a frame after this adds to it, whatever the spot
+        self._view = None  # a frame after this adds to it, whatever the spot
         return self.belief()
 
-    def predict(
-        self, stay_probability: float | None = None, anywhere_probability: float = 0.0
-    ) -> None:
-        """The robot moved: spread the belief along the room graph, and a share of it
-        (``anywhere_probability``) over all rooms (:func:`localizer.belief.transition_matrix`)."""
-        self.filter.predict(stay_probability, anywhere_probability)
-
-    def moved_since_latest(self, observation: Observation) -> bool:
-        """Whether the robot may have moved since the latest frame folded in: there is one,
-        and ``observation`` was not taken within :data:`SAME_VIEW_M` of it (without odometry
-        on either, it cannot tell, and says it may have)."""
-        return self.latest is not None and not self._same_view(observation)
+    def predict(self, stay_probability: float | None = None) -> None:
+        """The robot moved: spread the belief along the room graph."""
+        self.filter.predict(stay_probability)
 
     def reset(self, prior: Mapping[str, float] | None = None) -> RoomBelief:
         """Uniform belief (global localization), or ``prior`` (``{room: weight}``)."""
         self.filter.reset(prior)
         self.latest = None
         self.doubted = frozenset()
-        self._before_latest = None
+        self._view = None
         return self.belief()
 
     def belief(self, state: LocalizationState | None = None) -> RoomBelief:

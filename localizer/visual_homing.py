@@ -381,9 +381,11 @@ def _arrived(step: HomeStep, goal: Fingerprint, p: HomingParams) -> bool:
 def same_spot(here: Fingerprint, there: Fingerprint, params: HomingParams | None = None) -> bool:
     """Whether the view ``here`` was taken where the view ``there`` was, by the images alone:
     homing from ``here`` toward ``there`` would say it has arrived (a short home vector, little
-    parallax, most of ``there``'s features matched; see the module docstring). False where
-    the two views match too little to tell, or come from different detectors."""
-    params = params or HomingParams()
+    parallax, ``arrive_matched_fraction`` of ``there``'s features matched; see the module
+    docstring): within about 0.1 m in the rendered square room. False where
+    the two views match too little to tell, or come from different detectors. By default the
+    "best" step: the test needs its length, parallax and matches only, not the pose."""
+    params = params or HomingParams(step=StepParams("best"))
     if here.detector != there.detector:
         return False
     try:

@@ -41,13 +41,9 @@ from localizer.visual_homing import HomingResult
 RESET_WAIT_S = 1.0
 _log = logging.getLogger(__name__)
 POLL_S = 0.1  # how often a waiting localization looks at its deadline and at stop()
-PASSIVE_ANYWHERE_PROBABILITY = 0.05
-"""Between two passive localizations from different spots (or from a robot without odometry)
-the robot moved: the belief is spread along the room graph (stay 0.8) and this share of it over
-every room, as the robot may have been driven through several rooms, carried, or taken
-through a door the map does not hold (a map of photos has no doors at all). Without it a
-belief of 1.000 in the kitchen outlived a drive into the corridor and the seminar room on
-the demo's map, for 3 of 4 robots (``docs/results.md``, session 28)."""
+ODOMETRY_RETRY_S = 60.0
+"""After the robot gave no odometry (a camera alone on the bus: each query times out), passive
+localizations go without it for this long, in seconds, before asking again."""
 
 
 class LocalizationStoppedError(RuntimeError):
@@ -123,7 +119,7 @@ class LocalizationRunner:
         self.robot = StoppableRobot(robot, self._stopping)
         self.max_pending = max_pending
         self._pending = 0
-        self._no_odometry = False  # the robot gave none once: passive looks go without
+        self._odometry_retry_s = 0.0  # monotonic s: passive looks go without odometry until
         self._pending_lock = threading.Lock()
         self.policy = policy
         self.params = params or ActiveParams()
@@ -186,10 +182,10 @@ class LocalizationRunner:
 
     def localize(self, active: bool, deadline_s: float | None = None) -> dict[str, Any]:
         """Capture and update the belief; with ``active``, start from a uniform belief and drive
-        to disambiguate while it is ambiguous (this takes a while). Without, one frame: the
-        belief is first spread if the robot moved since the latest frame
-        (:data:`PASSIVE_ANYWHERE_PROBABILITY`), and a frame from the latest one's spot
-        replaces it (:data:`localizer.localizer.SAME_VIEW_M`).
+        to disambiguate while it is ambiguous (this takes a while). Without, one frame with the
+        robot's odometry, folded in as a passive one (:meth:`localizer.localizer.Localizer.
+        update`: a frame of the latest view replaces its evidence, one of a new view is folded
+        in after the belief is spread).
 
         ``deadline_s`` (``time.monotonic()``): when the client stops waiting; a localization
         still waiting for its turn then is dropped (:class:`LocalizationDroppedError`).
@@ -215,9 +211,7 @@ class LocalizationRunner:
             else:
                 observation = localizer.observe(self.robot.capture().image)
                 observation = replace(observation, odometry=self._odometry())
-                if localizer.moved_since_latest(observation):
-                    localizer.predict(anywhere_probability=PASSIVE_ANYWHERE_PROBABILITY)
-                belief = localizer.update(observation)
+                belief = localizer.update(observation, passive=True)
             self._set(belief)
             _log_localization(belief, time.monotonic() - start_s, summary)
             return self.belief() | ({"active": summary} if summary is not None else {})
@@ -226,22 +220,31 @@ class LocalizationRunner:
 
     def _odometry(self) -> Pose2D | None:
         """The robot's odometry for a passive look, by which requests from one spot count once
-        (:data:`localizer.localizer.SAME_VIEW_M`). None from a robot that gave none (a camera
-        alone on the bus: its odometry query times out), which is logged and not asked again;
-        whether its frames were taken on one spot is then told by the images
-        (:func:`localizer.visual_homing.same_spot`)."""
-        if self._no_odometry:
+        (:data:`localizer.localizer.SAME_VIEW_M`). None from a robot that gives none (a camera
+        alone on the bus: its odometry query times out), logged when it stops and when it comes
+        back, and not asked again for :data:`ODOMETRY_RETRY_S`; whether two frames were taken on
+        one spot is then told by the images (:func:`localizer.visual_homing.same_spot`)."""
+        now_s = time.monotonic()
+        if now_s < self._odometry_retry_s:
             return None
         try:
-            return self.robot.odometry()
-        except Exception as error:  # any base fault: the look goes on without
-            self._no_odometry = True
-            _log.warning(
-                "no odometry from the robot (%s): whether it moved between two passive "
-                "localizations is told by their images alone",
-                error,
-            )
+            odometry = self.robot.odometry()
+        except LocalizationStoppedError:
+            raise
+        except Exception as error:  # a base fault of any kind: the look goes on without
+            if self._odometry_retry_s == 0.0:
+                _log.warning(
+                    "no odometry from the robot (%s): whether it moved between two passive "
+                    "localizations is told by their images, for the next %.0f s at least",
+                    error,
+                    ODOMETRY_RETRY_S,
+                )
+            self._odometry_retry_s = now_s + ODOMETRY_RETRY_S
             return None
+        if self._odometry_retry_s:
+            _log.info("odometry from the robot again")
+            self._odometry_retry_s = 0.0
+        return odometry
 
     @contextmanager
     def driving(self) -> Iterator[StoppableRobot]:

@@ -269,16 +269,29 @@ def test_a_frame_of_unknown_odometry_whose_image_repeats_the_latest_replaces_its
     assert again == pytest.approx(once)
 
 
-def test_the_robot_may_have_moved_since_a_frame_from_elsewhere_or_of_unknown_odometry():
+def test_frames_of_one_view_are_compared_with_its_first_frame():
     localizer = Localizer(one_and_two_place_map())
-    assert not localizer.moved_since_latest(seen_at(localizer, 0.0, 0.0))  # no frame yet
-    localizer.update(seen_at(localizer, 0.0, 0.0))
-    assert not localizer.moved_since_latest(seen_at(localizer, 0.2, 0.1))
-    assert localizer.moved_since_latest(seen_at(localizer, 1.0, 0.0))
-    other_view = replace(frame_seeing(localizer, 2, "cellar", 0.9), odometry=None)
-    assert localizer.moved_since_latest(
-        replace(other_view, fingerprint=localizer.map.fingerprint(3))
-    )
+    once = localizer.update(seen_at(localizer, 0.0, 0.0)).as_dict()
+    localizer.update(seen_at(localizer, 0.25, 0.0))  # the same view
+    then = localizer.update(seen_at(localizer, 0.5, 0.0)).as_dict()  # 0.25 m on, 0.5 m from it
+    assert then["attic"] / then["cellar"] == pytest.approx((once["attic"] / once["cellar"]) ** 2)
+
+
+def test_a_passive_frame_of_a_new_view_is_folded_in_after_the_belief_is_spread():
+    localizer = Localizer(one_and_two_place_map())  # two rooms, no doors
+    once = localizer.update(seen_at(localizer, 0.0, 0.0), passive=True).as_dict()
+    then = localizer.update(seen_at(localizer, 1.0, 0.0), passive=True).as_dict()
+    share = localizer.config.passive_anywhere_probability / 2
+    spread = {room: (1 - 2 * share) * p + share for room, p in once.items()}
+    expected = (spread["attic"] / spread["cellar"]) * (once["attic"] / once["cellar"])
+    assert then["attic"] / then["cellar"] == pytest.approx(expected)
+
+
+def test_a_passive_frame_of_the_latest_view_replaces_its_evidence_unspread():
+    localizer = Localizer(one_and_two_place_map())
+    once = localizer.update(seen_at(localizer, 0.0, 0.0), passive=True).as_dict()
+    again = localizer.update(seen_at(localizer, 0.1, 0.0), passive=True).as_dict()
+    assert again == pytest.approx(once)
 
 
 def test_after_a_check_is_folded_in_a_frame_from_the_same_spot_adds_its_evidence():
