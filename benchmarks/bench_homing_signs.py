@@ -8,13 +8,16 @@ this prints:
   the sign the truth would give (``oracle sign``: how much a better sign could gain; pairs
   without geometry take the matched ALV);
 - on the pairs whose axis lies within 30° of the truth (either sign), how often each of
-  ``best``'s three sign votes is right: the cheirality above the floor, the matched ALV, the
-  ALV of all features turned by the pose's yaw (:func:`localizer.visual_homing.
-  signed_pose_direction_rad`);
+  ``best``'s sign votes is right: the cheirality above the floor, the matched ALV, the ALV of
+  all features turned by the pose's yaw and the elevations' change
+  (:func:`localizer.visual_homing.signed_pose_direction_rad`);
 - the median error of the verified pose's yaw against the headings' difference (degrees);
 - the score of ``best`` with the cheirality vote weighted by each inlier's parallax
   (``parallax-weighted``: inliers near the axis, whose parallax is within the noise, count
-  less), a variant measured here and not adopted.
+  less; with the three votes of before session 28), a variant measured here and not adopted;
+- how often the elevation vote (:func:`localizer.verification.elevation_vote`, whatever its
+  t-statistic) is right, and the score of ``best`` without it (``without the elevation
+  vote``: the three votes of ``best`` before session 28).
 
 Run: ``python benchmarks/bench_homing_signs.py DATASET [DATASET ...]``; docs/homing.md names
 the datasets it was run on.
@@ -37,8 +40,10 @@ from localizer.verification import (
     FLOOR_ELEVATION_DEG,
     Verification,
     cheirality_sign,
+    elevation_vote,
     home_direction_rad,
 )
+from localizer.visual_homing import signed_pose_direction_rad
 from toploc.evaluation.homing import (
     FeatureSettings,
     PairCache,
@@ -95,8 +100,13 @@ def run(dataset: Path) -> None:
     best = _home_directions("pose-vote", places, cache, pairs)
     matched = _home_directions("matched-alv", places, cache, pairs)
     alvs = [alv_from_bearings(f.bearings_rad) for f in fingerprints]
-    oracle, weighted = best.copy(), best.copy()
-    votes: dict[str, list[bool]] = {"cheirality": [], "matched ALV": [], "ALV, pose yaw": []}
+    oracle, weighted, without_elevation = best.copy(), best.copy(), best.copy()
+    votes: dict[str, list[bool]] = {
+        "cheirality": [],
+        "matched ALV": [],
+        "ALV, pose yaw": [],
+        "elevation": [],
+    }
     yaw_errors_deg: list[float] = []
     for k, (i, j) in enumerate(pairs.tolist()):
         v = cache.verification(i, j)
@@ -116,13 +126,21 @@ def run(dataset: Path) -> None:
             )
         rough = [d for d in (matched[k], alv_rad) if math.isfinite(d)]
         side = weighted_cheirality(v, cache.rays(i), cache.rays(j))
-        total = side + sum(float(np.sign(math.cos(d - axis))) for d in rough)
+        alvs_say = sum(float(np.sign(math.cos(d - axis))) for d in rough)
+        total = side + alvs_say
         flip = total < 0 or (total == 0 and side < 0)
         weighted[k] = axis + math.pi if flip else axis
+        cheirality = cheirality_sign(v, cache.rays(i), cache.rays(j))
+        elevation, _ = elevation_vote(v, cache.rays(i), cache.rays(j))
+        without_elevation[k] = signed_pose_direction_rad(
+            v, matched[k], alvs[i], alvs[j], cheirality
+        )
         if min(both) > GOOD_AXIS_DEG:
             continue
         right = 1 if both[0] <= both[1] else -1
-        votes["cheirality"].append(cheirality_sign(v, cache.rays(i), cache.rays(j)) == right)
+        votes["cheirality"].append(cheirality == right)
+        if elevation != 0:
+            votes["elevation"].append(elevation == right)
         for name, d in (("matched ALV", matched[k]), ("ALV, pose yaw", alv_rad)):
             if math.isfinite(d):
                 votes[name].append(np.sign(math.cos(d - axis)) == right)
@@ -130,7 +148,9 @@ def run(dataset: Path) -> None:
     print(
         f"{dataset.name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
         f"{score(errors(best)):.3f}, oracle sign {score(errors(oracle)):.3f}, parallax-weighted "
-        f"{score(errors(weighted)):.3f}; yaw error median {np.median(yaw_errors_deg):.1f} deg; "
+        f"{score(errors(weighted)):.3f}, without the elevation vote "
+        f"{score(errors(without_elevation)):.3f}; "
+        f"yaw error median {np.median(yaw_errors_deg):.1f} deg; "
         f"{len(votes['cheirality'])} pairs with the axis within "
         f"{GOOD_AXIS_DEG:.0f} deg, votes right: {shares}"
     )

@@ -324,6 +324,62 @@ def cheirality_sign(
     return 1
 
 
+ELEVATION_MIN_DEG = 3.0
+"""Inliers nearer the horizon than this (degrees, in either panorama) give no distance ratio
+(:func:`elevation_vote`): their elevations' tangents are within the noise of zero."""
+ELEVATION_MIN_INLIERS = 5
+"""Fewer usable inliers give no elevation vote (:func:`elevation_vote`)."""
+
+
+def elevation_vote(
+    verification: Verification,
+    query_rays: np.ndarray,
+    place_rays: np.ndarray,
+    min_elevation_deg: float = FLOOR_ELEVATION_DEG,
+) -> tuple[int, float]:
+    """The side of ``translation_dir``'s axis the place lies on, by how the inliers'
+    elevations change: +1 the translation as it is, -1 its opposite, 0 without a vote; and
+    the t-statistic of that vote (its sign is the vote's opposite; 0.0 without a vote).
+
+    A point at height h above or below the camera, at horizontal distance d, is seen at an
+    elevation e with tan e = h / d: the ratio of its two tangents is the ratio of its two
+    distances, ``log(tan e_query / tan e_place) = log(d_place / d_query)``, and the points on
+    the side of the axis the place lies on are nearer the place. Each inlier above
+    ``min_elevation_deg`` (degrees) in both panoramas, at least :data:`ELEVATION_MIN_DEG` off
+    the horizon on one side of it in both, gives that log ratio times the cosine of its
+    bearing to the axis (query frame); their mean against its standard error is the
+    t-statistic. Where the cheirality of :func:`cheirality_sign` is weakest, at points near
+    the axis whose bearing barely changes, the distance changes most. Fewer than
+    :data:`ELEVATION_MIN_INLIERS` such inliers: no vote. Rays as for :func:`verify`.
+    """
+    t = verification.translation_dir
+    if t is None or len(verification.inlier_pairs) == 0 or np.hypot(t[0], t[1]) < 1e-6:
+        return 0, 0.0
+    z_query = query_rays[verification.inlier_pairs[:, 0], 2]
+    z_place = place_rays[verification.inlier_pairs[:, 1], 2]
+    tan_query = z_query / np.sqrt(np.maximum(1.0 - z_query**2, 1e-12))
+    tan_place = z_place / np.sqrt(np.maximum(1.0 - z_place**2, 1e-12))
+    z_floor = math.sin(math.radians(min_elevation_deg))
+    tan_min = math.tan(math.radians(ELEVATION_MIN_DEG))
+    usable = (
+        (z_query > z_floor)
+        & (z_place > z_floor)
+        & (np.abs(tan_query) > tan_min)
+        & (np.abs(tan_place) > tan_min)
+        & (np.sign(tan_query) == np.sign(tan_place))
+    )
+    if int(usable.sum()) < ELEVATION_MIN_INLIERS:
+        return 0, 0.0
+    axis = np.asarray(t[:2], dtype=float) / float(np.hypot(t[0], t[1]))
+    side = query_rays[verification.inlier_pairs[usable, 0], :2] @ axis
+    terms = np.log(np.abs(tan_query[usable]) / np.abs(tan_place[usable])) * side
+    spread = float(terms.std(ddof=1))
+    if spread == 0.0 or float(terms.mean()) == 0.0:
+        return 0, 0.0
+    statistic = float(terms.mean()) / (spread / math.sqrt(len(terms)))
+    return (1 if statistic < 0 else -1), statistic
+
+
 def home_direction_rad(verification: Verification, min_inliers: int = 1) -> float:
     """Direction (rad, CCW from the query's heading, (-pi, pi]) from the query to the place on
     the floor: the azimuth of ``translation_dir`` (see the module docstring). NaN when no

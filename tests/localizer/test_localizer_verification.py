@@ -264,3 +264,54 @@ def test_cheirality_sign_is_counted_above_the_floor() -> None:
     truth = Verification(len(query), pairs, 0.0, np.eye(3), home)
     assert cheirality_sign(truth, query, place) == 1
     assert cheirality_sign(truth, query, place, min_elevation_deg=-90.0) == -1
+
+
+def test_elevation_vote_says_which_side_of_the_axis_the_place_lies_on() -> None:
+    from dataclasses import replace
+
+    from localizer.verification import elevation_vote
+
+    query, place, pairs = two_views(np.random.default_rng(5), 120, 0.4, np.array([1.0, 0.5, 0.0]))
+    result = verify(query, place, pairs, VerificationParams(seed=0))
+    vote, statistic = elevation_vote(result, query, place)
+    assert vote == 1 and statistic < -2.0
+    flipped = replace(result, translation_dir=-result.translation_dir)
+    assert elevation_vote(flipped, query, place)[0] == -1
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.floats(-np.pi, np.pi),
+    st.floats(0.5, 3.0),
+    st.floats(-np.pi, np.pi),
+    st.integers(0, 2**32 - 1),
+)
+def test_elevation_vote_follows_the_true_translation_whatever_the_pose(
+    heading_rad: float, distance_m: float, direction_rad: float, seed: int
+) -> None:
+    """With exact rays and the true pose (no RANSAC), the elevations side with the truth."""
+    from localizer.verification import elevation_vote
+
+    t_query = distance_m * np.array([np.cos(direction_rad), np.sin(direction_rad), 0.0])
+    query, place, pairs = two_views(np.random.default_rng(seed), 60, heading_rad, t_query)
+    home = rz(heading_rad).T @ (-t_query) / distance_m  # the place, in the query's frame
+    truth = Verification(len(pairs), pairs, float(heading_rad), rz(heading_rad).T, home)
+    assert elevation_vote(truth, query, place)[0] == 1
+
+
+def test_elevation_vote_needs_points_off_the_horizon() -> None:
+    from dataclasses import replace
+
+    from localizer.verification import ELEVATION_MIN_INLIERS, elevation_vote
+
+    query, place, pairs = two_views(np.random.default_rng(7), 40, 0.0, np.array([1.0, 0.0, 0.0]))
+    truth = Verification(len(pairs), pairs, 0.0, np.eye(3), np.array([-1.0, 0.0, 0.0]))
+    flat_query, flat_place = query.copy(), place.copy()
+    flat_query[:, 2] = flat_place[:, 2] = 0.0  # every point at the camera's height
+    assert elevation_vote(truth, flat_query, flat_place) == (0, 0.0)
+    few = pairs[: ELEVATION_MIN_INLIERS - 1]
+    assert elevation_vote(replace(truth, inliers=len(few), inlier_pairs=few), query, place) == (
+        0,
+        0.0,
+    )
+    assert elevation_vote(Verification.none(), query, place) == (0, 0.0)

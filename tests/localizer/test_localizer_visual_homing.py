@@ -344,6 +344,19 @@ def test_pose_direction_keeps_the_axis_the_alvs_agree_with():
     assert _angle_error_deg(direction, truth) == pytest.approx(math.degrees(0.02), abs=1e-6)
 
 
+def test_pose_direction_takes_the_elevations_side_where_the_other_votes_tie():
+    truth, yaw, alv_here, alv_home = _pose_case()
+    wrong_way = _verification(yaw, truth + math.pi)
+    # the all-feature ALV (right) against the matched ALV and the cheirality (wrong): 1 to 2;
+    # the elevations side with the truth, and the tie goes their way
+    direction = signed_pose_direction_rad(
+        wrong_way, truth + math.pi, alv_here, alv_home, 1, elevation=-1
+    )
+    assert _angle_error_deg(direction, truth) < 1e-6
+    without = signed_pose_direction_rad(wrong_way, truth + math.pi, alv_here, alv_home, 1)
+    assert _angle_error_deg(without, truth) == pytest.approx(180.0)
+
+
 def test_pose_direction_without_geometry_is_the_matched_direction():
     direction = signed_pose_direction_rad(Verification.none(), 1.2, np.ones(2), np.zeros(2), 0)
     assert direction == pytest.approx(1.2)

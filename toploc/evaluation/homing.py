@@ -30,11 +30,12 @@ manifest (section 5.6). The others work without headings:
   yaw (the thesis method with the verification as its compass), ``"matched-alv"`` without
   geometry;
 * ``"pose-vote"``: the axis of the verified translation (any inlier count) with the sign that
-  most of three votes give: the pose's cheirality counted on the inliers above the floor
-  (:func:`localizer.verification.cheirality_sign`), ``"matched-alv"`` and ``"pose-compass"``;
-  ``"matched-alv"`` without geometry (:func:`localizer.visual_homing.signed_pose_direction_rad`,
-  the closed loop's ``"pose"`` variant). The three fail on different pairs (see that
-  function).
+  most of four votes give: the pose's cheirality counted on the inliers above the floor
+  (:func:`localizer.verification.cheirality_sign`), the change of the inliers' elevations
+  where it is significant (:func:`localizer.visual_homing.counted_elevation_vote`),
+  ``"matched-alv"`` and ``"pose-compass"``; ``"matched-alv"`` without geometry
+  (:func:`localizer.visual_homing.signed_pose_direction_rad`, the closed loop's ``"pose"``
+  variant). The four fail on different pairs (see that function).
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
@@ -87,7 +88,7 @@ from localizer.verification import (
     home_direction_rad,
     verify,
 )
-from localizer.visual_homing import signed_pose_direction_rad
+from localizer.visual_homing import counted_elevation_vote, signed_pose_direction_rad
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import results_in_order, spawn_process_pool
@@ -371,7 +372,12 @@ def _home_directions(
             return np.array(
                 [
                     signed_pose_direction_rad(
-                        v, m, alvs[i], alvs[j], cheirality_sign(v, cache.rays(i), cache.rays(j))
+                        v,
+                        m,
+                        alvs[i],
+                        alvs[j],
+                        cheirality_sign(v, cache.rays(i), cache.rays(j)),
+                        counted_elevation_vote(v, cache.rays(i), cache.rays(j)),
                     )
                     for v, m, (i, j) in zip(verifications, matched, pairs.tolist(), strict=True)
                 ]
