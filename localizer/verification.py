@@ -346,8 +346,9 @@ def elevation_vote(
     distances, ``log(tan e_query / tan e_place) = log(d_place / d_query)``, and the points on
     the side of the axis the place lies on are nearer the place. Each inlier above
     ``min_elevation_deg`` (degrees) in both panoramas, at least :data:`ELEVATION_MIN_DEG` off
-    the horizon on one side of it in both, gives that log ratio times the cosine of its
-    bearing to the axis (query frame); their mean against its standard error is the
+    the horizon on one side of it in both, gives that log ratio times its ray's component
+    along the axis (query frame: the cosine of its bearing to the axis times that of its
+    elevation); their mean against its standard error is the
     t-statistic. Where the cheirality of :func:`cheirality_sign` is weakest, at points near
     the axis whose bearing barely changes, the distance changes most. Fewer than
     :data:`ELEVATION_MIN_INLIERS` such inliers: no vote. Rays as for :func:`verify`.
