@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
-from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -44,13 +43,13 @@ from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from mapdb.loading import load_snapshot
 from robot.worlds import make_world
+from toploc.evaluation.localization import QueryOutcome, count_outcomes, outcome_of
 from toploc.maps import ensure_world_map, kidnapped_robot
 from toploc.runner import LocalizationRunner
 
 OFFICES = ("office_a", "office_b")
 WALK = ("kitchen", "kitchen", "corridor", "corridor", "seminar", "storage", "corridor", "office_b")
 STOP_M = 2.0  # odometric metres between two stops of the walk
-OUTCOMES = ("right, localized", "right, ambiguous", "WRONG, LOCALIZED", "wrong, ambiguous", "lost")
 
 
 class WithoutOdometry:
@@ -94,17 +93,6 @@ class Walk:
         pass
 
 
-def outcome(belief: dict, room: str) -> str:
-    """The outcome (a name of :data:`OUTCOMES`) of a belief message for a robot in ``room``."""
-    if belief["state"] == "lost":
-        return OUTCOMES[4]
-    top = max(belief["rooms"], key=belief["rooms"].get)
-    localized = belief["state"] == "localized"
-    if top == room:
-        return OUTCOMES[0] if localized else OUTCOMES[1]
-    return OUTCOMES[2] if localized else OUTCOMES[3]
-
-
 def still(loaded: LoadedMap, args: argparse.Namespace) -> None:
     db, world = args.db, make_world("building", args.world_seed)
     localized = np.zeros(args.requests, dtype=int)
@@ -133,30 +121,37 @@ def still(loaded: LoadedMap, args: argparse.Namespace) -> None:
 
 def walk(loaded: LoadedMap, args: argparse.Namespace) -> None:
     db, world = args.db, make_world("building", args.world_seed)
-    counts: Counter[str] = Counter()
-    sure_and_wrong = []
+    config = LocalizerConfig()  # (no keyword: the code before session 28 runs this too)
+    if args.anywhere is not None:
+        config = LocalizerConfig(passive_anywhere_probability=args.anywhere)
+    outcomes, sure_and_wrong = [], []
     for seed in range(args.trials):
         stops = [kidnapped_robot(world, room, 100 * seed + i, db) for i, room in enumerate(WALK)]
         walker: Robot = Walk(stops)
         if args.no_odometry:
             walker = WithoutOdometry(walker)
-        config = LocalizerConfig()  # (no keyword: the code before session 28 runs this too)
-        if args.anywhere is not None:
-            config = LocalizerConfig(passive_anywhere_probability=args.anywhere)
         runner = LocalizationRunner(Localizer(loaded, config), walker)
         for i, room in enumerate(WALK):
             belief = runner.localize(active=False)
-            counts[outcome(belief, room)] += 1
-            if outcome(belief, room) == OUTCOMES[2]:
-                top = max(belief["rooms"], key=belief["rooms"].get)
-                sure_and_wrong.append(f"walk {seed} stop {i + 1} in {room}: {top}")
+            top = max(belief["rooms"], key=belief["rooms"].get)
+            query = QueryOutcome(
+                f"walk {seed} stop {i + 1} in {room}",
+                room,
+                top,
+                belief["rooms"][top],
+                belief["state"],
+                {},
+            )
+            outcomes.append(outcome_of(query, loaded.rooms))
+            if outcomes[-1] == "wrong_localized":
+                sure_and_wrong.append(f"{query.image}: {top}")
     doors = "without its doors" if args.no_doors else "with its doors"
     odometry = "without odometry" if args.no_odometry else "with odometry"
     print(
         f"{args.trials} walks of {len(WALK)} stops ({' > '.join(WALK)}), one request each; "
         f"the map {doors}; {odometry}"
     )
-    print(", ".join(f"{name} {counts[name]}" for name in OUTCOMES))
+    print(", ".join(f"{name} {n}" for name, n in count_outcomes(outcomes).items()))
     for line in sure_and_wrong:
         print("  wrong and localized:", line)
 
