@@ -13,7 +13,9 @@ map recorded from there into another room and homes to the route's end place. If
 in that room, it is at the end place when the route ends and homes there at once; if it
 started in a look-alike, the same drive ends elsewhere (:class:`RouteCheck`). The robot drives
 back through the views it took on the way out, homing to each, to the start; there the check
-is folded into the belief. If the homing to the end place arrived but late, the robot is at a
+is folded into the belief. A check that arrived fixed the robot's odometry in the map's frame
+at the end place: if the way back ends where the map has the start place, the robot retraced
+the map's route and is in that room (from a look-alike it ends a look-alike's offset away). If the homing to the end place arrived but late, the robot is at a
 known place of a room without look-alike, and drives a recorded route from there into the
 look-alike instead: the room whose place it then reaches at once gains the odds.
 """
@@ -110,7 +112,8 @@ class ActiveParams:
     rate is the interval's low end, and the false rate stays at the 0.1 set on seeds 14 and
     15 (session 20), twice the interval's high end, as a twin whose doors stand alike fools
     every check of it, not one in forty. So one check that arrives leaves the belief
-    ambiguous (8 < the localized ratio 10); with its look-alike's check that did not, 36.
+    ambiguous (8 < the localized ratio 10); with its look-alike's check that did not, 36; one
+    whose way back retraced the map's route (:func:`_retraced`), 64.
     ``hall_route_hit_rate`` and ``hall_route_false_rate`` take their place for a route that
     ends in the hall the room's look-alikes open onto too (:func:`shared_rooms`) when none of
     them has a recorded route beyond it: driven from a twin, such a route ends in that hall as
@@ -187,7 +190,9 @@ class RouteCheck:
     views it took on the way out, or ``room``'s look-alike by a recorded route from ``end``),
     where the check was folded into the belief (unless an earlier check of the room came out
     the same, see :func:`_check_route`); None: it did not, and the belief started afresh or
-    was kept. ``started``: homing to ``start`` arrived and the route was driven."""
+    was kept. ``started``: homing to ``start`` arrived and the route was driven; ``afresh``:
+    the robot did not get back to a place it knew, and the belief started afresh (what earlier
+    checks told is gone with it)."""
 
     room: str
     start: int
@@ -198,6 +203,7 @@ class RouteCheck:
     end_homing_m: float = 0.0
     back_room: str | None = None
     started: bool = True
+    afresh: bool = False
 
 
 @dataclass(frozen=True)
@@ -326,7 +332,7 @@ def localize_actively(
             tried_routes.add(start.id)
             rival = _likely_twin(belief, start.room, localizer.lookalikes)
             notify(localizer.belief(LocalizationState.HOMING))
-            told = frozenset(done.confirmed for done in checks if _told(done, start.room))
+            told = told_outcomes(checks, start.room)
             done, captured, homing, observation = _check_route(
                 localizer, robot, go, start, route, rival, params, told
             )
@@ -464,10 +470,17 @@ def _faintly_seen(observation: Observation, min_inliers: int, tried: set[int]) -
     return max(seen, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
 
 
-def _told(check: RouteCheck, room: str) -> bool:
-    """Whether ``check`` checked ``room`` and came back to where it began: its outcome
-    (:attr:`RouteCheck.confirmed`) told about ``room``, folded in or already known."""
-    return check.room == room and check.back_room == room
+def told_outcomes(checks: Sequence[RouteCheck], room: str) -> frozenset[bool]:
+    """The outcomes (:attr:`RouteCheck.confirmed`) the checks of ``room`` have told about it,
+    folded in or already known: of the checks that came back to ``room``, since the belief
+    last started afresh (:attr:`RouteCheck.afresh`: what a check told before then was about a
+    belief that is gone, and a later check that comes out the same tells it again)."""
+    last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
+    return frozenset(
+        check.confirmed
+        for check in checks[last + 1 :]
+        if check.room == room and check.back_room == room
+    )
 
 
 def _may_drive(belief: RoomBelief, drives: int, max_targets: int) -> bool:
@@ -598,7 +611,7 @@ def _check_route(
     to_start = home(start.id)
     distance += to_start.distance_m
     frames += len(to_start.lengths)
-    confirmed, at_end, end_inliers, back_room = False, to_start, 0.0, None
+    confirmed, at_end, end_inliers, back_room, afresh = False, to_start, 0.0, None, False
     homed_to = start.id if to_start.arrived else None  # where the robot stands at the end
     stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
     frame = _frame_by_view(robot, localizer.map.fingerprint(start.id), stored, to_start, params)
@@ -622,6 +635,12 @@ def _check_route(
         # that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the robot was
         # not in arrived at once)
         confirmed = seen and _at_once(at_end, route, params)
+        hall = _hall_check_alone(localizer, start.room, route, params)
+        # at the end place, a known place, the robot's odometry is fixed in the map's frame:
+        # coming back to where the map has the start place, it retraced the recorded route
+        known = None  # (a hall the look-alikes share may look alike at both their doors)
+        if confirmed and not hall:
+            known = _known_frame(localizer, robot, route.end, at_end, params)
         way_back = None
         if seen and not confirmed and rival is not None:  # at the end place, known
             way_back = _way_back(localizer, robot, route.end, at_end, rival, params)
@@ -642,6 +661,7 @@ def _check_route(
                 localizer.update_rooms({back_room: _route_ratio(params)})
             else:  # somewhere along the way back: the look decides
                 localizer.reset()
+                afresh = True
         else:
             # back through the views taken on the way out, each homed to (a frame fixed at the
             # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
@@ -655,11 +675,13 @@ def _check_route(
                 if not confirmed and localizer.alone(start.room):
                     localizer.doubt(start.room)  # its looks may have been an unknown twin's
                 if confirmed not in told:
-                    hall = _hall_check_alone(localizer, start.room, route, params)
                     ratio = _route_ratio(params, hall) if confirmed else _miss_ratio(params, hall)
+                    if known is not None and _retraced(known, robot, start, route, params):
+                        ratio *= _route_ratio(params)  # it is in start's room now, by the map
                     localizer.update_rooms({start.room: ratio})
             elif not back.arrived:  # not back: it may be in any room now, the look decides
                 localizer.reset()
+                afresh = True
     elif not to_start.arrived and stood_at is not None and to_start.reason != CANCELLED:
         # the check could not start: back to the place the robot stood at, not left where the
         # homing gave up (world seed 30's house, one place per room: a robot at bedroom_b's
@@ -689,6 +711,7 @@ def _check_route(
         end_homing_m,
         back_room,
         started,
+        afresh,
     )
     return check, frames, at_end, observation
 
@@ -729,13 +752,43 @@ def _back_by_marks(
     return distance, frames
 
 
+def _known_frame(
+    localizer: Localizer, robot: Robot, place_id: int, homed: HomingResult, params: ActiveParams
+) -> DriveFrame | None:
+    """The drive frame fixed by place ``place_id``'s stored view and pose, where ``homed``
+    arrived; None if it did not, the place has no stored pose or the views do not match."""
+    place = localizer.map.place(place_id)
+    if not homed.arrived or place.x_m is None or place.y_m is None or place.heading_deg is None:
+        return None
+    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
+    return _frame_by_view(robot, localizer.map.fingerprint(place_id), stored, homed, params)
+
+
+def _retraced(
+    known: DriveFrame, robot: Robot, start: Place, route: Route, params: ActiveParams
+) -> bool:
+    """Whether the robot, back by its own views from the end place of ``route`` (where its
+    odometry was fixed in the map's frame, ``known``), stands where the map has ``start``,
+    within the odometry's drift over the route (as :func:`_at_once`): then the way it came is
+    the map's route, and it is in ``start``'s room. From a look-alike the drive ended at the
+    same end place, and the way back leads a look-alike's offset away."""
+    assert start.x_m is not None and start.y_m is not None
+    here = known.pose(robot.odometry())
+    return math.dist((here.x_m, here.y_m), (start.x_m, start.y_m)) <= _slack_m(route, params)
+
+
+def _slack_m(route: Route, params: ActiveParams) -> float:
+    """How far from a place reached by ``route`` the robot may stand by odometry alone: the
+    odometry's drift over the route (:class:`ActiveParams`)."""
+    return min(
+        params.route_slack_m + params.route_slack_share * route.length_m, params.route_slack_max_m
+    )
+
+
 def _at_once(homed: HomingResult, route: Route, params: ActiveParams) -> bool:
     """Whether homing to ``route``'s end place, after driving the route, arrived at once: after
     at most the odometry's drift over the route (:class:`ActiveParams`)."""
-    slack_m = min(
-        params.route_slack_m + params.route_slack_share * route.length_m, params.route_slack_max_m
-    )
-    return homed.arrived and homed.distance_m <= slack_m
+    return homed.arrived and homed.distance_m <= _slack_m(route, params)
 
 
 def _route_rates(params: ActiveParams, hall: bool) -> tuple[float, float]:
@@ -797,15 +850,9 @@ def _way_back(
     """A recorded route from place ``end``, where homing ``at_end`` brought the robot, into
     room ``into``, and the drive frame fixed by ``end``'s stored view; None if the homing did
     not arrive, ``end`` has no stored pose, no route leads there or the views do not match."""
-    place = localizer.map.place(end)
-    if not at_end.arrived or place.x_m is None or place.y_m is None or place.heading_deg is None:
-        return None
     route = route_into(localizer.map.legs, localizer.map.places, end, {into}, params.route_max_m)
-    if route is None:
-        return None
-    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
-    frame = _frame_by_view(robot, localizer.map.fingerprint(end), stored, at_end, params)
-    return None if frame is None else (route, frame)
+    frame = None if route is None else _known_frame(localizer, robot, end, at_end, params)
+    return None if route is None or frame is None else (route, frame)
 
 
 def _ending(belief: RoomBelief, drives: int, max_targets: int) -> str:

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import CANCELLED, ENDINGS, ActiveParams, localize_actively, rooms_to_check
+from localizer.active import (
+    CANCELLED,
+    ENDINGS,
+    ActiveParams,
+    RouteCheck,
+    localize_actively,
+    rooms_to_check,
+    told_outcomes,
+)
 from localizer.belief import LocalizationState
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
@@ -262,6 +270,25 @@ def test_a_room_checked_once_is_checked_after_its_rival_whatever_came_out(locali
     belief = localizer.update_rooms({"office_a": 30.0, "office_b": 20.0})
     assert rooms_to_check(belief, {}) == ["office_a", "office_b"]
     assert rooms_to_check(belief, {"office_a": 1}) == ["office_b", "office_a"]
+
+
+def check(room: str, confirmed: bool, back_room: str | None, afresh: bool = False) -> RouteCheck:
+    return RouteCheck(room, 1, 2, confirmed, 10.0, back_room=back_room, afresh=afresh)
+
+
+def test_a_rooms_checks_tell_what_came_back_to_it():
+    checks = [check("office_a", False, "office_a"), check("office_b", True, "office_b")]
+    assert told_outcomes(checks, "office_a") == {False}
+    assert told_outcomes(checks, "office_b") == {True}
+    assert told_outcomes([check("office_a", True, None)], "office_a") == frozenset()
+    assert told_outcomes([check("office_a", True, "office_b")], "office_a") == frozenset()
+
+
+def test_checks_before_the_belief_started_afresh_tell_nothing_any_more():
+    missed = check("office_b", False, "office_b")
+    lost_way = check("office_a", True, None, afresh=True)
+    assert told_outcomes([missed, lost_way], "office_b") == frozenset()
+    assert told_outcomes([lost_way, missed], "office_b") == {False}
 
 
 def test_only_likely_rooms_are_checked_by_a_route(localizer):

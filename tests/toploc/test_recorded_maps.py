@@ -188,6 +188,19 @@ def test_twins_no_place_tells_apart_are_told_apart_by_a_recorded_route(driven_to
     assert result.distance_m >= sum(check.distance_m for check in result.checks)
 
 
+def test_a_check_that_arrives_and_retraces_the_maps_route_back_settles(driven_to_kitchen):
+    """A robot in office_b checks office_b by its route into the kitchen and arrives at once.
+    At the kitchen's place its odometry is fixed in the map's frame; back through its own views
+    it stands where the map has the place it began at: the way it came is the map's route, and
+    it is in office_b, whichever office it started in. One check settles it (8 : 1 when only
+    the arrival counted)."""
+    robot, result = kidnapped_and_localized(driven_to_kitchen, "office_b", 4)
+    [check] = result.checks
+    assert check.confirmed and check.back_room == "office_b" and not check.afresh
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert result.final.top[0] == "office_b" == robot.true_room()
+
+
 @pytest.mark.parametrize(("room", "seed"), [("office_b", 4), ("office_a", 5), ("office_b", 6)])
 def test_a_route_check_never_confirms_the_twin_nor_leaves_the_robot_sure_and_wrong(
     driven, room, seed

@@ -104,6 +104,7 @@ class Trial:
                     "end_homing_m": c.end_homing_m,
                     "back_room": c.back_room,
                     "started": c.started,
+                    "afresh": c.afresh,
                 }
                 for c in self.result.checks
             ],
