@@ -604,9 +604,11 @@ def _check_route(
     :func:`rooms_to_check`). The way back: if homing to the route's end
     place arrived but not at once, by a recorded route from there into ``rival`` (``start``'s
     likely look-alike, if any); otherwise back along the views taken on the way out, to
-    ``start``. A check whose homing to ``start`` does not arrive drives no route: the robot
-    homes back to the place it stood at, if it stood at one. Returns the check, the frames
-    captured, the homing to the route's end place and the last observation."""
+    ``start``, where a check that arrived at once is folded in again if the robot stands where
+    the map has ``start`` (:func:`_retraced`). A check whose homing to ``start`` does not
+    arrive drives no route: the robot homes back to the place it stood at, if it stood at one.
+    Returns the check, the frames captured, the homing to the route's end place and the last
+    observation."""
     assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
     distance, frames = 0.0, 0
     stood_at = localizer.latest.at_place if localizer.latest is not None else None
@@ -773,8 +775,9 @@ def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
     there arrives as if at the end place, with the robot's odometry then fixed a look-alike's
     offset off; its way back to the look-alike then ends where the map has the start place
     (world seed 39's house recorded one place per room, whose twins the map does not know:
-    robots in bathroom_a and bedroom_b ended sure of bathroom_b and bedroom_a, 0.997 and 0.973,
-    after checks into the hall that arrived on 12-26 spread inliers)."""
+    three robots that checks into the hall, arrived on 12-26 spread inliers, had left sure of
+    the twin they were not in, 0.973, were made surer, 0.997 for two, when the rule left out
+    only halls the map knows both twins open onto)."""
     end_room = localizer.map.place(route.end).room
     return end_room not in partners_of(localizer.map.edges).get(room, frozenset())
 
@@ -785,8 +788,8 @@ def _retraced(
     """Whether the robot, back by its own views from the end place of ``route`` (where its
     odometry was fixed in the map's frame, ``known``), stands where the map has ``start``,
     within the odometry's drift over the route (as :func:`_at_once`): then the way it came is
-    the map's route, and it is in ``start``'s room. From a look-alike the drive ended at the
-    same end place, and the way back leads a look-alike's offset away."""
+    the map's route, and it is in ``start``'s room. A robot that started in a look-alike and
+    still arrived at the end place comes back a look-alike's offset away."""
     assert start.x_m is not None and start.y_m is not None
     here = known.pose(robot.odometry())
     return math.dist((here.x_m, here.y_m), (start.x_m, start.y_m)) <= _slack_m(route, params)
