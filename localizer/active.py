@@ -639,7 +639,6 @@ def _check_route(
         # that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the robot was
         # not in arrived at once)
         confirmed = seen and _at_once(at_end, route, params)
-        hall = _hall_check_alone(localizer, start.room, route, params)
         # at the end place, a known place, the robot's odometry is fixed in the map's frame:
         # coming back to where the map has the start place, it retraced the recorded route
         known = None
@@ -679,6 +678,7 @@ def _check_route(
                 if not confirmed and localizer.alone(start.room):
                     localizer.doubt(start.room)  # its looks may have been an unknown twin's
                 if confirmed not in told:
+                    hall = _hall_check_alone(localizer, start.room, route, params)
                     ratio = _route_ratio(params, hall) if confirmed else _miss_ratio(params, hall)
                     if known is not None and _retraced(known, robot, start, route, params):
                         ratio *= _route_ratio(params)  # it is in start's room now, by the map
