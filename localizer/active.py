@@ -869,8 +869,10 @@ def _way_back(
     room ``into``, and the drive frame fixed by ``end``'s stored view; None if the homing did
     not arrive, ``end`` has no stored pose, no route leads there or the views do not match."""
     route = route_into(localizer.map.legs, localizer.map.places, end, {into}, params.route_max_m)
-    frame = None if route is None else _known_frame(localizer, robot, end, at_end, params)
-    return None if route is None or frame is None else (route, frame)
+    if route is None:
+        return None
+    frame = _known_frame(localizer, robot, end, at_end, params)
+    return None if frame is None else (route, frame)
 
 
 def _ending(belief: RoomBelief, drives: int, max_targets: int) -> str:
