@@ -13,7 +13,9 @@ map recorded from there into another room and homes to the route's end place. If
 in that room, it is at the end place when the route ends and homes there at once; if it
 started in a look-alike, the same drive ends elsewhere (:class:`RouteCheck`). The robot drives
 back through the views it took on the way out, homing to each, to the start; there the check
-is folded into the belief. A check that arrived at a place beyond the rooms its room opens
+is folded into the belief. A route that ends in a room its room opens onto (a hall, where a
+look-alike's door may repeat the view a look-alike's offset along) goes on from the end place,
+re-anchored there, to a room beyond. A check that arrived at a place beyond the rooms its room opens
 onto fixed the robot's odometry in the map's frame there: if the way back ends where the map
 has the start place, the robot retraced the map's route and is in that room (from a
 look-alike it ends a look-alike's offset away). If the homing to the end place arrived but
@@ -194,7 +196,9 @@ class RouteCheck:
     the same, see :func:`_check_route`); None: it did not, and the belief started afresh or
     was kept. ``started``: homing to ``start`` arrived and the route was driven; ``afresh``:
     the robot did not get back to a place it knew, and the belief started afresh (what earlier
-    checks told is gone with it)."""
+    checks told is gone with it); ``via``: the place of a room ``room``
+    opens onto that the route reached at once and went on from to ``end`` (None: it went
+    straight to ``end``; :func:`_onward`)."""
 
     room: str
     start: int
@@ -206,6 +210,7 @@ class RouteCheck:
     back_room: str | None = None
     started: bool = True
     afresh: bool = False
+    via: int | None = None
 
 
 @dataclass(frozen=True)
@@ -343,8 +348,8 @@ def localize_actively(
             belief = localizer.belief()
             notify(belief)
             checks.append(done)
-            end_room = localizer.map.place(route.end).room
-            visits.append(Visit(route.end, end_room, homing, belief, done.started))
+            end_room = localizer.map.place(done.end).room
+            visits.append(Visit(done.end, end_room, homing, belief, done.started))
             if homing.reason == CANCELLED:
                 ended = CANCELLED
                 break
@@ -607,6 +612,8 @@ def _check_route(
     ``start``, where a check that arrived at once is folded in again if the robot stands where
     the map has ``start`` (:func:`_retraced`). A check whose homing to ``start`` does not
     arrive drives no route: the robot homes back to the place it stood at, if it stood at one.
+    A route that ends in a room ``start``'s room opens onto, reached at once, goes on from its
+    end place to a room beyond (:func:`_onward`), and the check is of the two legs together.
     Returns the check, the frames captured, the homing to the route's end place and the last
     observation."""
     assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
@@ -616,6 +623,7 @@ def _check_route(
     distance += to_start.distance_m
     frames += len(to_start.lengths)
     confirmed, at_end, end_inliers, back_room, afresh = False, to_start, 0.0, None, False
+    via: int | None = None
     homed_to = start.id if to_start.arrived else None  # where the robot stands at the end
     stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
     frame = _frame_by_view(robot, localizer.map.fingerprint(start.id), stored, to_start, params)
@@ -626,19 +634,28 @@ def _check_route(
             pose = frame.pose(robot.odometry())
             marks.append(_Mark(localizer.extract(robot.capture().image), pose))
 
-        distance += drive_route(robot, route, frame, mark).distance_m
+        leg, leg_frame = route, frame
+        while True:
+            distance += drive_route(robot, leg, leg_frame, mark).distance_m
+            at_end = home(leg.end)
+            distance += at_end.distance_m
+            frames += len(at_end.lengths)
+            seen, end_inliers = False, 0.0
+            if at_end.arrived:
+                seen, end_inliers = _look_at_end(localizer, robot, leg.end)
+                frames += 1
+            # at once, and the look there names the end room (which has no look-alike): a
+            # homing that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the
+            # robot was not in arrived at once)
+            confirmed = seen and _at_once(at_end, leg, params)
+            onward = None
+            if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
+                onward = _onward(localizer, robot, start.room, leg.end, at_end, params)
+            if onward is None or at_end.reason == CANCELLED:
+                break
+            via, (leg, leg_frame) = leg.end, onward
+            route = _joined(route, leg)
         frames += len(marks)
-        at_end = home(route.end)
-        distance += at_end.distance_m
-        frames += len(at_end.lengths)
-        seen, end_inliers = False, 0.0
-        if at_end.arrived:
-            seen, end_inliers = _look_at_end(localizer, robot, route.end)
-            frames += 1
-        # at once, and the look there names the end room (which has no look-alike): a homing
-        # that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the robot was
-        # not in arrived at once)
-        confirmed = seen and _at_once(at_end, route, params)
         # at the end place, a known place, the robot's odometry is fixed in the map's frame:
         # coming back to where the map has the start place, it retraced the recorded route
         known = None
@@ -668,12 +685,12 @@ def _check_route(
         else:
             # back through the views taken on the way out, each homed to (a frame fixed at the
             # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
-            driven_m, homings = _back_by_marks(localizer, robot, marks, frame, stored, params)
+            driven_m, homings, held = _back_by_marks(localizer, robot, marks, frame, stored, params)
             back = home(start.id)
             distance += driven_m + back.distance_m
             frames += homings + len(back.lengths)
             homed_to = start.id if back.arrived else None
-            if _at_once(back, route, params):  # back where it began: it tells about this room
+            if held and _at_once(back, route, params):  # back where it began: it tells about it
                 back_room = start.room
                 if not confirmed and localizer.alone(start.room):
                     localizer.doubt(start.room)  # its looks may have been an unknown twin's
@@ -683,7 +700,7 @@ def _check_route(
                     if known is not None and _retraced(known, robot, start, route, params):
                         ratio *= _route_ratio(params)  # it is in start's room now, by the map
                     localizer.update_rooms({start.room: ratio})
-            elif not back.arrived:  # not back: it may be in any room now, the look decides
+            elif not (held and back.arrived):  # it may be in any room now: the look decides
                 localizer.reset()
                 afresh = True
     elif not to_start.arrived and stood_at is not None and to_start.reason != CANCELLED:
@@ -716,6 +733,7 @@ def _check_route(
         back_room,
         started,
         afresh,
+        via,
     )
     return check, frames, at_end, observation
 
@@ -735,11 +753,17 @@ def _back_by_marks(
     frame: DriveFrame,
     start: Pose2D,
     params: ActiveParams,
-) -> tuple[float, int]:
+) -> tuple[float, int, bool]:
     """Drive back through ``marks`` (last first) to ``start``'s position: at each, home to its
     view and fix the drive frame again by it (``frame`` is the one of the way out). Returns the
-    odometric metres driven and the frames the homings captured."""
-    distance, frames = 0.0, 0
+    odometric metres driven, the frames the homings captured, and whether the way back held:
+    the homing to the last mark homed to (the first taken, nearest the start) arrived, or there
+    was none. A way back whose homings to its marks do not arrive may end anywhere: on world
+    seed 39's building (two places per room), a robot in office_a whose homings to all seven
+    of its marks gave up in the seminar room and the corridor came back into office_b and
+    homed at once to the spot of office_a's place there (its check had arrived: sure and
+    wrong, 0.997); of the other 30 ways back on that map, every last mark was reached."""
+    distance, frames, held = 0.0, 0, True
     for mark in (*reversed(marks), None):
         here = frame.pose(robot.odometry())
         to = (start.x_m, start.y_m) if mark is None else (mark.pose.x_m, mark.pose.y_m)
@@ -752,8 +776,62 @@ def _back_by_marks(
         again = (
             _frame_by_view(robot, mark.view, mark.pose, homed, params) if homed.arrived else None
         )
-        frame = again or frame
-    return distance, frames
+        frame, held = again or frame, homed.arrived
+    return distance, frames, held
+
+
+def _onward(
+    localizer: Localizer,
+    robot: Robot,
+    room: str,
+    place_id: int,
+    homed: HomingResult,
+    params: ActiveParams,
+) -> tuple[Route, DriveFrame] | None:
+    """A recorded route from place ``place_id`` (in a room ``room`` opens onto, where ``homed``
+    arrived at once) on to a room beyond: neither ``room`` nor a room it opens onto (the map's
+    edges) nor one with a look-alike; and the drive frame fixed by the place's stored view.
+    None if there is no such route (up to ``route_max_m``) or the frame cannot be fixed.
+
+    A route into a hall tells little where the hall repeats: driven from a look-alike that
+    opens onto it, it ends a look-alike's offset along the hall, where the view is the end
+    place's and homing arrives at once (world seed 39's house recorded one place per room:
+    hall checks arrived from the look-alike in 4 of 5 and ended three kidnappings sure and
+    wrong, 0.973). Re-anchored at the hall place, the drive on to a room beyond ends there
+    only if the robot was at the hall place, and from the look-alike's door it ends a
+    look-alike's offset off, where the room beyond does not repeat."""
+    doors = partners_of(localizer.map.edges)
+    leave = {name for name, twins in localizer.lookalikes.items() if twins}
+    leave |= {room, *doors.get(room, frozenset())}
+    on = route_out(localizer.map.legs, localizer.map.places, place_id, leave, params.route_max_m)
+    return _from_known(localizer, robot, place_id, homed, on, params)
+
+
+def _from_known(
+    localizer: Localizer,
+    robot: Robot,
+    place_id: int,
+    homed: HomingResult,
+    route: Route | None,
+    params: ActiveParams,
+) -> tuple[Route, DriveFrame] | None:
+    """``route`` (from place ``place_id``) and the drive frame fixed by the place's stored view
+    where ``homed`` arrived (:func:`_known_frame`); None if there is no route or no frame."""
+    if route is None:
+        return None
+    frame = _known_frame(localizer, robot, place_id, homed, params)
+    return None if frame is None else (route, frame)
+
+
+def _joined(first: Route, then: Route) -> Route:
+    """``first`` and ``then`` (which starts at ``first``'s end) as one route."""
+    return Route(
+        first.start,
+        then.end,
+        first.start_xy_m,
+        first.waypoints_xy_m + then.waypoints_xy_m,
+        first.length_m + then.length_m,
+    )
 
 
 def _known_frame(
@@ -869,10 +947,7 @@ def _way_back(
     room ``into``, and the drive frame fixed by ``end``'s stored view; None if the homing did
     not arrive, ``end`` has no stored pose, no route leads there or the views do not match."""
     route = route_into(localizer.map.legs, localizer.map.places, end, {into}, params.route_max_m)
-    if route is None:
-        return None
-    frame = _known_frame(localizer, robot, end, at_end, params)
-    return None if frame is None else (route, frame)
+    return _from_known(localizer, robot, end, at_end, route, params)
 
 
 def _ending(belief: RoomBelief, drives: int, max_targets: int) -> str:

@@ -9,10 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from robot_helpers import RobotWrapper
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
 from localizer.localizer import Localizer
+from localizer.robot_protocol import Capture
 from localizer.visual_homing import HomingResult, drive_home
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
@@ -394,10 +396,82 @@ def test_a_check_that_cannot_start_brings_the_robot_back_to_where_it_stood(drive
 
 def test_of_twins_with_routes_beyond_only_the_one_with_the_shorter_takes_it(driven_to_kitchen):
     """office_b's way on to the kitchen is shorter than office_a's: office_b is checked by it,
-    office_a by its short route into the corridor (a long route drifts more; where the pair's
-    checks disagree, the one beyond tells)."""
+    office_a by its short route into the corridor, and on from the corridor's place, once
+    there, to the kitchen (a long route drifts more; homing to the corridor's place
+    re-anchors the drive)."""
     loaded = load_map(driven_to_kitchen)
     robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
     result = localize_actively(Localizer(loaded), robot)
-    ends = {check.room: loaded.place(check.end).room for check in result.checks}
-    assert ends == {"office_a": "corridor", "office_b": "kitchen"}
+    legs = {
+        check.room: (check.via and loaded.place(check.via).room, loaded.place(check.end).room)
+        for check in result.checks
+    }
+    assert legs == {"office_a": ("corridor", "kitchen"), "office_b": (None, "kitchen")}
+
+
+def test_a_check_into_a_hall_that_repeats_is_told_by_the_drive_on_beyond_it(driven_to_kitchen):
+    """A robot in office_b, whose homing to office_b's places goes nowhere, checks office_a by
+    its route into the corridor. In a corridor that repeats, homing to the corridor's place
+    arrives at once wherever the route ended (here: it stops there), an office's offset along;
+    the drive on from there to the kitchen, re-anchored at the corridor's place, misses the
+    kitchen, and office_a is not confirmed."""
+    loaded = load_map(driven_to_kitchen)
+    localizer = Localizer(loaded)
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_b", seed=5, camera=CAMERA)
+
+    def home(place_id: int) -> HomingResult:
+        goal, room = loaded.fingerprint(place_id), loaded.place(place_id).room
+        if room == "office_b":
+            return HomingResult(False, 0, 0.0, "converged", goal)
+        if room == "corridor":  # it repeats: the view where the route ended is the place's
+            return HomingResult(True, 0, 0.0, "arrived", localizer.extract(robot.capture().image))
+        return drive_home(robot, goal, localizer.extract, ActiveParams().homing)
+
+    result = localize_actively(localizer, robot, home=home)
+    checks = [check for check in result.checks if check.room == "office_a" and check.started]
+    assert checks and all(check.via is not None for check in checks)
+    assert not any(check.confirmed for check in checks)
+    assert not (
+        result.final.top[0] == "office_a" and result.final.state is LocalizationState.LOCALIZED
+    )
+
+
+class FoggedRobot(RobotWrapper):
+    """The simulated robot, whose camera sees a blank wall while ``fogged``."""
+
+    def __init__(self, robot: SimulatedRobot) -> None:
+        super().__init__(robot)
+        self.fogged = False
+
+    def capture(self) -> Capture:
+        captured = self.robot.capture()
+        if not self.fogged:
+            return captured
+        return replace(captured, image=np.full_like(captured.image, 200))
+
+
+def test_a_way_back_whose_marks_were_not_reached_tells_nothing_and_starts_afresh(
+    driven_to_kitchen,
+):
+    """Out of the offices the robot sees nothing but while it homes to a place: its homings to
+    the views it took on the way out do not arrive, so where it ends, even at once at a place
+    of the room, may be the look-alike's. The check is not folded in: the belief starts
+    afresh."""
+    loaded = load_map(driven_to_kitchen)
+    localizer = Localizer(loaded)
+    robot = FoggedRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
+    )
+
+    def home(place_id: int) -> HomingResult:
+        robot.fogged = False
+        homed = drive_home(
+            robot, loaded.fingerprint(place_id), localizer.extract, ActiveParams().homing
+        )
+        robot.fogged = loaded.place(place_id).room not in ("office_a", "office_b")
+        return homed
+
+    result = localize_actively(localizer, robot, home=home)
+    started = [check for check in result.checks if check.started]
+    assert started
+    assert all(check.afresh and check.back_room is None for check in started)

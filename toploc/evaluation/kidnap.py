@@ -105,6 +105,7 @@ class Trial:
                     "back_room": c.back_room,
                     "started": c.started,
                     "afresh": c.afresh,
+                    "via": c.via,
                 }
                 for c in self.result.checks
             ],
