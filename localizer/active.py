@@ -329,7 +329,7 @@ def localize_actively(
             spent,
         )
         check = None
-        twins = _top_two_alike(localizer, belief)
+        twins = top_two_alike(belief, localizer.map.rooms, localizer.lookalike_groups)
         unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
         if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
             checked = Counter(done.room for done in checks)
@@ -419,9 +419,12 @@ def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:
     return max_targets if len(visits) - told >= max_targets else told
 
 
-def _top_two_alike(localizer: Localizer, belief: RoomBelief) -> bool:
-    """Whether the two most likely rooms are in one group of look-alikes
-    (:attr:`Localizer.lookalike_groups`, which the belief reads together): then a route check
+def top_two_alike(
+    belief: RoomBelief, rooms: Sequence[str], groups: Sequence[Sequence[int]]
+) -> bool:
+    """Whether the two most likely rooms of ``belief`` are in one group of look-alikes
+    (``groups``: indices into ``rooms``, as :attr:`Localizer.lookalike_groups`, which the
+    belief reads together): then a route check
     comes before the policy's place (a counterpart a few decimetres off its twin's spot
     favours the room it is nearer to: on world seed 12's building recorded on one drive, one
     place per room, the offices' places stood at nearly one spot and drives to them ended sure
@@ -432,9 +435,8 @@ def _top_two_alike(localizer: Localizer, belief: RoomBelief) -> bool:
     second = belief.second
     if second is None:
         return False
-    rooms = localizer.map.rooms
     top, other = rooms.index(belief.top[0]), rooms.index(second[0])
-    return any(top in group and other in group for group in localizer.lookalike_groups)
+    return any(top in group and other in group for group in groups)
 
 
 def _to_confirm(

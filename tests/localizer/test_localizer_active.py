@@ -14,8 +14,9 @@ from localizer.active import (
     localize_actively,
     rooms_to_check,
     told_outcomes,
+    top_two_alike,
 )
-from localizer.belief import LocalizationState
+from localizer.belief import LocalizationState, RoomBelief
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from localizer.visual_homing import HomingResult, drive_home
@@ -289,6 +290,20 @@ def test_checks_before_the_belief_started_afresh_tell_nothing_any_more():
     lost_way = check("office_a", True, None, afresh=True)
     assert told_outcomes([missed, lost_way], "office_b") == frozenset()
     assert told_outcomes([lost_way, missed], "office_b") == {False}
+
+
+def test_the_top_two_rooms_are_alike_when_one_group_of_look_alikes_holds_both():
+    """office_b looks like office_a and like the storage room: a group of three, read together,
+    whose top two need not be a pair."""
+    rooms = ("corridor", "office_a", "office_b", "storage")
+    group = ((1, 2, 3),)
+
+    def belief(*probabilities: float) -> RoomBelief:
+        return RoomBelief.from_probabilities(rooms, np.array(probabilities))
+
+    assert top_two_alike(belief(0.01, 0.33, 0.32, 0.34), rooms, group)  # storage, office_a
+    assert not top_two_alike(belief(0.40, 0.30, 0.20, 0.10), rooms, group)  # corridor first
+    assert not top_two_alike(belief(0.01, 0.33, 0.32, 0.34), rooms, ())
 
 
 def test_only_likely_rooms_are_checked_by_a_route(localizer):
