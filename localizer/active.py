@@ -15,8 +15,8 @@ started in a look-alike, the same drive ends elsewhere (:class:`RouteCheck`). Th
 back through the views it took on the way out, homing to each, to the start; there the check
 is folded into the belief. A route that ends in a room its room opens onto (a hall, where a
 look-alike's door may repeat the view a look-alike's offset along) goes on from the end place,
-re-anchored there, to a room beyond. A check that arrived at a place beyond the rooms its room opens
-onto fixed the robot's odometry in the map's frame there: if the way back ends where the map
+re-anchored there, to a room beyond. A check that arrived at a place beyond the rooms its room
+opens onto fixed the robot's odometry in the map's frame there: if the way back ends where the map
 has the start place, the robot retraced the map's route and is in that room (from a
 look-alike it ends a look-alike's offset away). If the homing to the end place arrived but
 late, the robot is at a known place of a room without look-alike, and drives a recorded route
@@ -196,9 +196,9 @@ class RouteCheck:
     the same, see :func:`_check_route`); None: it did not, and the belief started afresh or
     was kept. ``started``: homing to ``start`` arrived and the route was driven; ``afresh``:
     the robot did not get back to a place it knew, and the belief started afresh (what earlier
-    checks told is gone with it); ``via``: the place of a room ``room``
-    opens onto that the route reached at once and went on from to ``end`` (None: it went
-    straight to ``end``; :func:`_onward`)."""
+    checks told is gone with it); ``via``: the place of a room ``room`` opens onto that the
+    route reached at once and went on from to ``end`` (None: it went straight to ``end``;
+    :func:`_onward`)."""
 
     room: str
     start: int
@@ -424,14 +424,14 @@ def top_two_alike(
 ) -> bool:
     """Whether the two most likely rooms of ``belief`` are in one group of look-alikes
     (``groups``: indices into ``rooms``, as :attr:`Localizer.lookalike_groups`, which the
-    belief reads together): then a route check
-    comes before the policy's place (a counterpart a few decimetres off its twin's spot
-    favours the room it is nearer to: on world seed 12's building recorded on one drive, one
-    place per room, the offices' places stood at nearly one spot and drives to them ended sure
-    and wrong in 3 of 20 kidnappings). In a group of three, the top two need not be a pair:
-    world seed 43's building (two places per room) paired office_b with a storage room as well
-    as with office_a, the belief stayed a third each, and with storage on top and office_a
-    second no route checked the offices (14 of 20 kidnappings ended ambiguous)."""
+    belief reads together): then a route check comes before the policy's place (a counterpart
+    a few decimetres off its twin's spot favours the room it is nearer to: on world seed 12's
+    building recorded on one drive, one place per room, the offices' places stood at nearly
+    one spot and drives to them ended sure and wrong in 3 of 20 kidnappings). In a group of
+    three, the top two need not be a pair: world seed 43's building (two places per room)
+    paired office_b with a storage room as well as with office_a, the belief stayed a third
+    each, and with storage on top and office_a second no route checked the offices (14 of 20
+    kidnappings ended ambiguous)."""
     second = belief.second
     if second is None:
         return False
