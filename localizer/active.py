@@ -862,10 +862,10 @@ def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
     it, where the view is the end place's, and a check driven from the look-alike that stops
     there arrives as if at the end place, with the robot's odometry then fixed a look-alike's
     offset off; its way back to the look-alike then ends where the map has the start place
-    (world seed 39's house recorded one place per room, whose twins the map does not know:
-    three robots that checks into the hall, arrived on 12-26 spread inliers, had left sure of
-    the twin they were not in, 0.973, were made surer, 0.997 for two, when the rule left out
-    only halls the map knows both twins open onto)."""
+    (world seed 39's house recorded one place per room: three robots whose checks into the
+    hall, arriving on 12-26 spread inliers, had left them sure of the twin they were not in,
+    0.973, were made surer, 0.997 for two, when the rule left out only halls the map knows
+    both twins open onto)."""
     end_room = localizer.map.place(route.end).room
     return end_room not in partners_of(localizer.map.edges).get(room, frozenset())
 
