@@ -475,3 +475,34 @@ def test_a_way_back_whose_marks_were_not_reached_tells_nothing_and_starts_afresh
     started = [check for check in result.checks if check.started]
     assert started
     assert all(check.afresh and check.back_room is None for check in started)
+
+
+@pytest.fixture(scope="module")
+def twin_wings(tmp_path_factory):
+    """``house``'s hall and its two identical wings (bedroom_a and bathroom_a, bedroom_b and
+    bathroom_b, 6.6 m apart), one place each, recorded on one drive in that order (seed 3):
+    the calibration pairs the bedrooms, not the bathrooms."""
+    db = tmp_path_factory.mktemp("twin_wings") / "map.db"
+    rooms = ("hall", "bedroom_a", "bathroom_a", "bedroom_b", "bathroom_b")
+    record_map(make_world("house"), 1, 3, db, rooms=rooms, camera=CAMERA, drive=True)
+    return db
+
+
+def test_a_route_into_a_room_of_one_place_does_not_settle_what_a_copied_wing_would_repeat(
+    twin_wings,
+):
+    """A robot in bedroom_b checks bedroom_a by its route into bathroom_a: driven from
+    bedroom_b, it ends in bathroom_b, the bathroom_a the map has a place of seen at the same
+    spot of an identical room, and arrives at once; back through its own views, the robot
+    stands where the map has bedroom_a's place, by an odometry fixed a wing's offset off. The
+    map cannot tell from one place that bathroom_a has a twin, so the arrival is one route's
+    evidence, not a retraced route's (sure of bedroom_a, 0.985, when it counted as one)."""
+    loaded = load_map(twin_wings)
+    assert loaded.likelihood is not None
+    assert loaded.likelihood.lookalikes == (("bedroom_a", "bedroom_b"),)
+    robot = SimulatedRobot.kidnapped(make_world("house"), "bedroom_b", seed=0, camera=CAMERA)
+    result = localize_actively(Localizer(loaded), robot)
+    fooled = [c for c in result.checks if c.room == "bedroom_a" and c.confirmed]
+    assert fooled and loaded.place(fooled[0].end).room == "bathroom_a"
+    assert robot.true_room() == "bedroom_b"
+    assert result.final.state is not LocalizationState.LOCALIZED
