@@ -294,6 +294,7 @@ def localize_actively(
     homed_lost: set[int] = set()
     tried_routes: set[int] = set()
     checks: list[RouteCheck] = []
+    looked_closer: set[int] = set()
     while True:
         if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
             looks_elsewhere += 1
@@ -355,6 +356,9 @@ def localize_actively(
                 break
             continue
         if target is None:
+            target = _closer_look(localizer, looked_closer)
+            looked_closer |= {target} if target is not None else set()
+        if target is None:
             ended = _ending(belief, spent, params.max_targets)
             break
         context = context.trying(target)
@@ -404,6 +408,22 @@ def _look(localizer: Localizer, robot: Robot, at_place: int | None = None) -> Ob
     odometry (frames from one spot count once: :data:`localizer.localizer.SAME_VIEW_M`)."""
     observation = localizer.observe(robot.capture().image)
     return replace(observation, at_place=at_place, odometry=robot.odometry())
+
+
+def _closer_look(localizer: Localizer, looked: set[int]) -> int | None:
+    """The one place of the room the belief would settle on but for not seeing that place all
+    round (:meth:`Localizer.unseen_room`), if the robot has not homed there for this yet: the
+    loop homes there and looks before it ends. Looking where the room's place stands asks
+    what the all-round test asks, whether the robot is in that room and not at its door; the
+    odds come from what came before (on world seeds 43 and 45's house recorded one place per
+    room, 8 robots ended ambiguous at 36-49 times their room's twin, after their room's check
+    arrived and the twin's missed, looking from the twin's place's spot in their own room,
+    where their room's place covered less of the horizon; all 8 were right)."""
+    room = localizer.unseen_room()
+    if room is None:
+        return None
+    places = [place.id for place in localizer.map.places if place.room == room]
+    return next((place_id for place_id in places if place_id not in looked), None)
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:

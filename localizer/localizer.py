@@ -488,8 +488,17 @@ class Localizer:
 
     def belief(self, state: LocalizationState | None = None) -> RoomBelief:
         """The current belief; ``state`` overrides the computed one (the service's homing)."""
+        belief = self._belief_by_odds()
+        localized = belief.state is LocalizationState.LOCALIZED
+        if state is None and localized and not self._seen_all_round(belief.top[0]):
+            state = LocalizationState.AMBIGUOUS
+        return belief if state is None else belief.with_state(state)
+
+    def _belief_by_odds(self) -> RoomBelief:
+        """The current belief, its state by the probabilities and the latest frame's best count
+        alone (:func:`localizer.belief.classify`)."""
         evidence = None if self.latest is None else self.latest.evidence.places
-        belief = RoomBelief.from_probabilities(
+        return RoomBelief.from_probabilities(
             self.map.rooms,
             self.filter.probabilities,
             self._thresholds(self.filter.probabilities),
@@ -497,10 +506,17 @@ class Localizer:
             stamp_s=time.time(),
             count=self.likelihood.count,
         )
-        localized = belief.state is LocalizationState.LOCALIZED
-        if state is None and localized and not self._seen_all_round(belief.top[0]):
-            state = LocalizationState.AMBIGUOUS
-        return belief if state is None else belief.with_state(state)
+
+    def unseen_room(self) -> str | None:
+        """The most likely room when the belief would be ``localized`` but for that room's one
+        place not seen all round in the latest frame (:meth:`_seen_all_round`: the robot may
+        be in its doorway, or in the next room); else None. Homing to that place and looking
+        there answers it."""
+        belief = self._belief_by_odds()
+        room = belief.top[0]
+        if belief.state is not LocalizationState.LOCALIZED or self._seen_all_round(room):
+            return None
+        return room
 
     def _seen_all_round(self, room: str) -> bool:
         """Whether ``room`` has two places or more, or the latest frame's inliers with its one

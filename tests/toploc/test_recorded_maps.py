@@ -12,7 +12,7 @@ import pytest
 from robot_helpers import RobotWrapper
 
 from localizer.active import ActiveParams, localize_actively
-from localizer.belief import LocalizationState
+from localizer.belief import LocalizationState, StateThresholds, top_two_ratio
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture
 from localizer.visual_homing import HomingResult, drive_home
@@ -506,3 +506,42 @@ def test_a_route_into_a_room_of_one_place_does_not_settle_what_a_copied_wing_wou
     assert fooled and loaded.place(fooled[0].end).room == "bathroom_a"
     assert robot.true_room() == "bedroom_b"
     assert result.final.state is not LocalizationState.LOCALIZED
+
+
+def test_a_room_sure_by_its_odds_but_seen_on_little_of_the_horizon_is_settled_from_its_place(
+    twin_wings,
+):
+    """A robot in a corner of bathroom_b, the odds for bathroom_b strong (as after its route
+    check): the room's one place covers a third of the horizon from there, as from a doorway,
+    so the belief waits; homed to that place, the robot sees it all round."""
+    localizer = Localizer(load_map(twin_wings))
+    robot = SimulatedRobot.kidnapped(make_world("house"), "bathroom_b", seed=2, camera=CAMERA)
+    localizer.update(localizer.observe(robot.capture().image))
+    localizer.update_rooms({"bathroom_b": 1000.0})
+    assert localizer.belief().state is LocalizationState.AMBIGUOUS
+    assert localizer.unseen_room() == "bathroom_b"
+    [place] = [p for p in localizer.map.places if p.room == "bathroom_b"]
+    homed = drive_home(robot, localizer.map.fingerprint(place.id), localizer.extract)
+    assert homed.arrived
+    localizer.update(localizer.observe(robot.capture().image))
+    assert localizer.unseen_room() is None
+    assert localizer.belief().state is LocalizationState.LOCALIZED
+    assert localizer.belief().top[0] == "bathroom_b" == robot.true_room()
+
+
+def test_a_loop_held_back_only_by_a_one_place_room_seen_from_afar_ends_with_a_look_from_it(
+    twin_wings,
+):
+    """A robot in bathroom_b: its drives leave the odds for bathroom_b well past the one-place
+    ratio, but it stands where bathroom_b's one place covers little of its horizon. Rather
+    than end ambiguous with no telling place left, it homes to that place and looks."""
+    loaded = load_map(twin_wings)
+    robot = SimulatedRobot.kidnapped(make_world("house"), "bathroom_b", seed=0, camera=CAMERA)
+    result = localize_actively(Localizer(loaded), robot)
+    [place] = [p.id for p in loaded.places if p.room == "bathroom_b"]
+    before, last = result.visits[-2].belief, result.visits[-1]
+    assert before.state is LocalizationState.AMBIGUOUS and before.top[0] == "bathroom_b"
+    assert top_two_ratio(np.asarray(before.probabilities)) >= StateThresholds().one_place_ratio
+    assert last.place_id == place and last.homing.arrived
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert result.final.top[0] == "bathroom_b" == robot.true_room()
