@@ -4,8 +4,9 @@ Per world and ``K`` (places per room): a map is recorded in the rendered world a
 loop records one (:mod:`toploc.evaluation.recorded_maps`: K places per room, a random turn and
 a short drive between two, the robot's odometry as the pose, the world's doors as edges, then
 calibrated), and the simulated robot is kidnapped ``--trials`` times into the world's look-alike
-rooms (``building``: office_a/office_b; ``house``: the twin bedrooms and bathrooms) and localizes
-actively (:func:`toploc.evaluation.kidnap.run_kidnappings`).
+rooms (``building``: office_a/office_b; ``house``: the twin bedrooms and bathrooms; with
+``--every-room``, into each room of the world in turn) and localizes actively
+(:func:`toploc.evaluation.kidnap.run_kidnappings`).
 
 Reported per map: the five outcomes of the first look (a single frame off the map's places)
 and of the final belief, how many trials drove, the mean drives and distance, seconds per
@@ -29,11 +30,14 @@ its route-check and appearance rules looking at world seeds 26 and 27 (record se
 judged them on seed 28, and its route-end rule on seed 29 (record seeds 29, 30). Sessions 25
 and 26 wrote their changes on world seeds 30, 31 and 33 and judged them on seed 34; session 27
 wrote its changes on seeds 31, 34 and 35 and judged them on seed 36 (record seeds one up).
-World seeds 37 and up have not been looked at: the next change must be judged on them.
+Sessions 28-30 wrote their changes on world seeds 35, 37, 39 and 43 and judged them on 41, 43
+and 45. Session 31 wrote its changes on seeds 43 and 45 (and, kidnapping into every room,
+35-45) and judged them on seed 47 (record seed 48). World seeds 49 and up have not been looked
+at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
-        [--advised-offset M]] [--json out.json]
+        [--advised-offset M]] [--every-room] [--json out.json]
 """
 
 from __future__ import annotations
@@ -142,6 +146,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         if args.verbose:
             print(f"  {trial.describe()}  first {first_outcome(trial)}")
 
+    every = tuple(room.name for room in make_world(world, args.world_seed).rooms)
     run = run_kidnappings(
         world,
         args.trials,
@@ -151,6 +156,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         world_seed=args.world_seed,
         progress=False,
         on_trial=show,
+        rooms=every if args.every_room else None,
     )
     totals = run.totals()
     totals["first_outcomes"] = count_outcomes(first_outcome(t) for t in run.trials)
@@ -160,6 +166,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         "counterparts": len(likelihood.counterparts) if likelihood else 0,
     }
     row = {"world": world, "places_per_room": places, "advised": args.advised, "db": str(db)}
+    row["kidnapped_into"] = "every room" if args.every_room else "look-alikes"
     return row | lookalikes | {"run": run.to_json(), "totals": totals}
 
 
@@ -232,6 +239,11 @@ def main() -> None:
         action="store_true",
         help="record each map on one drive through the doors (legs stored), not room by room",
     )
+    parser.add_argument(
+        "--every-room",
+        action="store_true",
+        help="kidnap into every room of the world in turn, not only its look-alikes",
+    )
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args()
     worlds = args.worlds.split(",")
@@ -256,7 +268,8 @@ def main() -> None:
     print()
     print(
         f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "
-        f"{args.trials} kidnappings each, policy {args.policy}"
+        f"{args.trials} kidnappings each"
+        f"{' into every room' if args.every_room else ''}, policy {args.policy}"
         f"{', on one drive' if args.drive else ''}"
         f"{', twins declared' if args.declared else ''}"
         f"{', advised (2 counterpart places per look-alike pair)' if args.advised else ''}"
