@@ -6,7 +6,8 @@ a short drive between two, the robot's odometry as the pose, the world's doors a
 calibrated), and the simulated robot is kidnapped ``--trials`` times into the world's look-alike
 rooms (``building``: office_a/office_b; ``house``: the twin bedrooms and bathrooms; with
 ``--every-room``, into each room of the world in turn) and localizes actively
-(:func:`toploc.evaluation.kidnap.run_kidnappings`).
+(:func:`toploc.evaluation.kidnap.run_kidnappings`). ``--first-looks N`` instead kidnaps N
+times into every room and scores the single frame taken there, without driving.
 
 Reported per map: the five outcomes of the first look (a single frame off the map's places)
 and of the final belief, how many trials drove, the mean drives and distance, seconds per
@@ -37,7 +38,7 @@ at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
-        [--advised-offset M]] [--every-room] [--json out.json]
+        [--advised-offset M]] [--every-room] [--first-looks N] [--json out.json]
 """
 
 from __future__ import annotations
@@ -48,12 +49,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from localizer.localizer import Localizer
 from localizer.lookalikes import pairs_without_counterparts
 from robot.worlds import make_world
 from toploc.evaluation.kidnap import KIDNAP_ROOMS, Trial, describe_endings, run_kidnappings
 from toploc.evaluation.localization import OUTCOMES, count_outcomes
 from toploc.evaluation.recorded_maps import record_counterparts, record_map
-from toploc.maps import cache_dir, calibrate_map, load_map
+from toploc.maps import cache_dir, calibrate_map, kidnapped_robot, load_map
 
 SHORT = {
     "right_localized": "R+L",
@@ -170,6 +172,40 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
     return row | lookalikes | {"run": run.to_json(), "totals": totals}
 
 
+def first_looks(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]:
+    """``args.first_looks`` kidnappings into every room of ``world`` in turn (trial ``i``
+    seeded ``record_seed * 100_000 + i``, as :func:`run_kidnappings`), one look each and no
+    drive: the five outcomes of a single frame off the map's places, how many of the answers
+    stated at >= 0.9 were right, and each confidently wrong one."""
+    db = args_db(args, world, places)
+    scene = make_world(world, args.world_seed)
+    rooms = [room.name for room in scene.rooms]
+    localizer = Localizer(load_map(db))
+    names = " ".join(f"{SHORT[o]:>4s}" for o in OUTCOMES)
+    print(f"| world | K | first look {names} | >=0.9 right |")
+    outcomes, sure, sure_right, wrong = [], 0, 0, []
+    for i in range(args.first_looks):
+        robot = kidnapped_robot(scene, rooms[i % len(rooms)], args.record_seed * 100_000 + i, db)
+        localizer.reset()
+        belief = localizer.update(localizer.observe(robot.capture().image))
+        truth = robot.true_room()
+        right = belief.top[0] == truth
+        state = str(belief.state)
+        outcomes.append("lost" if state == "lost" else f"{'right' if right else 'wrong'}_{state}")
+        if state != "lost" and belief.top[1] >= 0.9:
+            sure, sure_right = sure + 1, sure_right + right
+        if outcomes[-1] == "wrong_localized":
+            wrong.append({"trial": i, "room": truth, "said": belief.top[0], "p": belief.top[1]})
+    counts = count_outcomes(outcomes)
+    print(
+        f"| {world} | {places} | {' '.join(f'{counts[o]:4d}' for o in OUTCOMES)} "
+        f"| {sure_right}/{sure} |"
+    )
+    for item in wrong:
+        print(f"    trial {item['trial']}: in {item['room']}, said {item['said']} {item['p']:.3f}")
+    return {"world": world, "places_per_room": places, "db": str(db), "first_looks": counts}
+
+
 def confident(totals: dict[str, Any]) -> str:
     """``right/n`` of the answers stated at >= 0.9."""
     bins = [b for b in totals["reliability"]["bins"] if b["low"] >= 0.9 and b["n"]]
@@ -244,6 +280,13 @@ def main() -> None:
         action="store_true",
         help="kidnap into every room of the world in turn, not only its look-alikes",
     )
+    parser.add_argument(
+        "--first-looks",
+        type=int,
+        default=0,
+        metavar="N",
+        help="instead of the loop: N kidnappings into every room, one look each, no drive",
+    )
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args()
     worlds = args.worlds.split(",")
@@ -258,12 +301,20 @@ def main() -> None:
     for world in worlds:
         for places in (int(k) for k in args.places.split(",")):
             print(f"{world}, {places} places per room:")
+            if args.first_looks:
+                rows.append(first_looks(args, world, places))
+                continue
             if not args.trials:  # record (or calibrate) the map only
                 args_db(args, world, places)
                 continue
             rows.append(run_one(args, world, places))
             print_table(rows[-1:])
     if not rows:
+        return
+    if args.first_looks:
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1) + "\n")
+            print(f"wrote {args.json}")
         return
     print()
     print(
