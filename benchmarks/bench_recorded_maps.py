@@ -49,6 +49,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from localizer.belief import RoomBelief
 from localizer.localizer import Localizer
 from localizer.lookalikes import pairs_without_counterparts
 from robot.worlds import make_world
@@ -75,10 +76,14 @@ TWINS: dict[str, tuple[tuple[str, str], ...]] = {
 
 def first_outcome(trial: Trial) -> str:
     """The outcome of the trial's first look (before any drive)."""
-    first = trial.result.first
-    if str(first.state) == "lost":
+    return look_outcome(trial.result.first, trial.true_room)
+
+
+def look_outcome(belief: RoomBelief, true_room: str) -> str:
+    """Which of :data:`OUTCOMES` ``belief`` is for a robot in ``true_room``."""
+    if str(belief.state) == "lost":
         return "lost"
-    return f"{'right' if first.top[0] == trial.true_room else 'wrong'}_{first.state}"
+    return f"{'right' if belief.top[0] == true_room else 'wrong'}_{belief.state}"
 
 
 def recorded_db(
@@ -189,11 +194,9 @@ def first_looks(args: argparse.Namespace, world: str, places: int) -> dict[str, 
         localizer.reset()
         belief = localizer.update(localizer.observe(robot.capture().image))
         truth = robot.true_room()
-        right = belief.top[0] == truth
-        state = str(belief.state)
-        outcomes.append("lost" if state == "lost" else f"{'right' if right else 'wrong'}_{state}")
-        if state != "lost" and belief.top[1] >= 0.9:
-            sure, sure_right = sure + 1, sure_right + right
+        outcomes.append(look_outcome(belief, truth))
+        if outcomes[-1] != "lost" and belief.top[1] >= 0.9:
+            sure, sure_right = sure + 1, sure_right + (belief.top[0] == truth)
         if outcomes[-1] == "wrong_localized":
             wrong.append({"trial": i, "room": truth, "said": belief.top[0], "p": belief.top[1]})
     counts = count_outcomes(outcomes)

@@ -357,7 +357,8 @@ def localize_actively(
             continue
         if target is None:
             target = _closer_look(localizer, looked_closer)
-            looked_closer |= {target} if target is not None else set()
+            if target is not None:
+                looked_closer.add(target)
         if target is None:
             ended = _ending(belief, spent, params.max_targets)
             break
