@@ -489,8 +489,7 @@ class Localizer:
     def belief(self, state: LocalizationState | None = None) -> RoomBelief:
         """The current belief; ``state`` overrides the computed one (the service's homing)."""
         belief = self._belief_by_odds()
-        localized = belief.state is LocalizationState.LOCALIZED
-        if state is None and localized and not self._seen_all_round(belief.top[0]):
+        if state is None and self._held_back(belief):
             state = LocalizationState.AMBIGUOUS
         return belief if state is None else belief.with_state(state)
 
@@ -513,10 +512,13 @@ class Localizer:
         be in its doorway, or in the next room); else None. Homing to that place and looking
         there answers it."""
         belief = self._belief_by_odds()
-        room = belief.top[0]
-        if belief.state is not LocalizationState.LOCALIZED or self._seen_all_round(room):
-            return None
-        return room
+        return belief.top[0] if self._held_back(belief) else None
+
+    def _held_back(self, belief: RoomBelief) -> bool:
+        """Whether ``belief``, ``localized`` by its odds, waits because its most likely room
+        is not seen all round in the latest frame (:meth:`_seen_all_round`)."""
+        localized = belief.state is LocalizationState.LOCALIZED
+        return localized and not self._seen_all_round(belief.top[0])
 
     def _seen_all_round(self, room: str) -> bool:
         """Whether ``room`` has two places or more, or the latest frame's inliers with its one
