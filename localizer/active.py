@@ -36,7 +36,6 @@ from dataclasses import dataclass, field, replace
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
-from localizer.lookalikes import partners_of
 from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Pose2D, Robot
 from localizer.routes import (
@@ -550,7 +549,7 @@ def _route_to_check(
     # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
     # bathroom_a and bedroom_a: a route between the two ends alike in both)
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
-    doors = partners_of(localizer.map.edges)
+    doors = localizer.doors
     rooms = rooms_to_check(belief, checked)
     beyond_m = functools.cache(
         lambda room: route_beyond_m(
@@ -831,7 +830,7 @@ def _onward(
     wrong, 0.973). Re-anchored at the hall place, the drive on to a room beyond ends there
     only if the robot was at the hall place, and from the look-alike's door it ends a
     look-alike's offset off, where the room beyond does not repeat."""
-    doors = partners_of(localizer.map.edges)
+    doors = localizer.doors
     leave = {name for name, twins in localizer.lookalikes.items() if twins}
     leave |= {room, *doors.get(room, frozenset())}
     on = route_out(localizer.map.legs, localizer.map.places, place_id, leave, params.route_max_m)
@@ -888,7 +887,7 @@ def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
     0.973, were made surer, 0.997 for two, when the rule left out only halls the map knows
     both twins open onto)."""
     end_room = localizer.map.place(route.end).room
-    return end_room not in partners_of(localizer.map.edges).get(room, frozenset())
+    return end_room not in localizer.doors.get(room, frozenset())
 
 
 def _end_fixes_the_frame(localizer: Localizer, room: str, route: Route, via: int | None) -> bool:
@@ -962,7 +961,7 @@ def _hall_check_alone(localizer: Localizer, room: str, route: Route, params: Act
     beyond its own hall: the check then stands alone, at the hall's rates
     (:class:`ActiveParams`)."""
     twins = localizer.lookalikes.get(room, frozenset())
-    doors = partners_of(localizer.map.edges)
+    doors = localizer.doors
     if localizer.map.place(route.end).room not in shared_rooms(doors, room, twins):
         return False
     graph, places, lookalikes = localizer.map.legs, localizer.map.places, localizer.lookalikes

@@ -255,6 +255,7 @@ class Localizer:
         pairs = calibrated.lookalikes if calibrated is not None else ()
         self.lookalike_groups = lookalike_groups(pairs, loaded.rooms)
         self.lookalikes = partners_of(pairs)
+        self.doors = partners_of(loaded.edges)  # the rooms each room opens onto
         self.counterparts = partners_of(calibrated.counterparts if calibrated is not None else ())
         # a query is extracted as the map's places were: their equalisation and keypoint cap
         self._overrides = matching_overrides(loaded.table.params[0]) if loaded.table.params else {}
