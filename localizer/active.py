@@ -411,8 +411,8 @@ def _look(localizer: Localizer, robot: Robot, at_place: int | None = None) -> Ob
 
 
 def _closer_look(localizer: Localizer, looked: set[int]) -> int | None:
-    """The one place of the room the belief would settle on but for not seeing that place all
-    round (:meth:`Localizer.unseen_room`), if the robot has not homed there for this yet: the
+    """A place of the room the belief would settle on but for not seeing that room all round
+    (:meth:`Localizer.unseen_room`), the first the robot has not homed to for this yet: the
     loop homes there and looks before it ends. Looking where the room's place stands asks
     what the all-round test asks, whether the robot is in that room and not at its door; the
     odds come from what came before (on world seeds 43 and 45's house recorded one place per

@@ -199,14 +199,14 @@ class StateThresholds:
       (``--seed 11``). No wrong answer reached 20 there, and none reached 10 on maps with
       several places per room (the dense house maps, the photo rooms, the building's queries;
       its leave-one-out of twin offices is wrong by construction). docs/results.md.
-    - ``one_place_min_coverage = 0.6``: and, when the top room has one place, the latest
-      frame's inliers with that place cover at least this share of the horizon
-      (:data:`localizer.evidence.ALL_ROUND_COVERAGE`); otherwise ``ambiguous``. A robot in a
-      doorway, or in the next room looking through the door, sees a one-place room on half
-      the horizon or less: on recorded maps of ``building`` with one place per room, robots
-      just inside an office said ``localized`` in the corridor at 0.97 from the corridor's
-      place at 43 and 57 inliers covering 0.51 and 0.35 of the horizon (the office's own place,
-      a metre or two away, at 17 and 13).
+    - ``min_coverage = 0.6``: and the latest frame's inliers with the top room's places, all
+      of them together, cover at least this share of the horizon
+      (:data:`localizer.evidence.ALL_ROUND_COVERAGE`); otherwise ``ambiguous`` (the localizer
+      applies it, :meth:`Localizer.belief`). A robot in a doorway, or in the next room
+      looking through the door, sees a room on half the horizon or less: on recorded maps of
+      ``building`` with one place per room, robots just inside an office said ``localized``
+      in the corridor at 0.97 from the corridor's place at 43 and 57 inliers covering 0.51
+      and 0.35 of the horizon (the office's own place, a metre or two away, at 17 and 13).
     - ``max_entropy_bits = 1.0``: and the belief is concentrated (e.g. 0.9 on one room and the
       rest over four others is 0.67 bits; a 50/50 split is 1 bit, which is never localized
       anyway because its ratio is 1).
@@ -217,7 +217,7 @@ class StateThresholds:
 
     localized_ratio: float = 10.0
     one_place_ratio: float = 20.0
-    one_place_min_coverage: float = ALL_ROUND_COVERAGE
+    min_coverage: float = ALL_ROUND_COVERAGE
     max_entropy_bits: float = 1.0
     lost_min_inliers: int = 20
 
@@ -227,10 +227,8 @@ class StateThresholds:
                 f"localized_ratio and one_place_ratio must be >= 1, got {self.localized_ratio}"
                 f" and {self.one_place_ratio}"
             )
-        if not 0.0 <= self.one_place_min_coverage <= 1.0:
-            raise ValueError(
-                f"one_place_min_coverage must be in [0, 1], got {self.one_place_min_coverage}"
-            )
+        if not 0.0 <= self.min_coverage <= 1.0:
+            raise ValueError(f"min_coverage must be in [0, 1], got {self.min_coverage}")
         if not self.max_entropy_bits >= 0.0:
             raise ValueError(f"max_entropy_bits must be >= 0, got {self.max_entropy_bits}")
         if self.lost_min_inliers < 0:

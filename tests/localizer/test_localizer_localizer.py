@@ -13,7 +13,7 @@ from localizer.belief import LocalizationState
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
-from localizer.localizer import LoadedMap, Localizer, to_grey
+from localizer.localizer import PARTIAL_VIEW_RATIO, LoadedMap, Localizer, to_grey
 from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
@@ -133,15 +133,18 @@ def test_a_map_calibrated_before_the_spread_count_is_read_on_raw_inliers(buildin
     assert states["spread"] is LocalizationState.LOST
 
 
-def one_and_two_place_map() -> LoadedMap:
-    """``attic`` with one place, ``cellar`` with two (random-texture fingerprints)."""
+def one_and_two_place_map(edges: tuple[tuple[str, str], ...] = ()) -> LoadedMap:
+    """``attic`` with one place, ``cellar`` with two (random-texture fingerprints of more than
+    100 keypoints each), joined by ``edges``."""
     rng = np.random.default_rng(0)
-    images = [rng.integers(0, 256, (64, 256), dtype=np.uint8) for _ in range(3)]
+    images = [rng.integers(0, 256, (96, 384), dtype=np.uint8) for _ in range(3)]
     fingerprints = [extract_with_camera(image, CameraSpec(), "sift") for image in images]
     rooms = ["attic", "cellar", "cellar"]
     table = FingerprintTable.stack("sift", [1, 2, 3], rooms, fingerprints)
     places = tuple(Place(i, room) for i, room in zip([1, 2, 3], rooms, strict=True))
-    return LoadedMap.from_snapshot(MapSnapshot(Path("m"), table, places, ("attic", "cellar"), ()))
+    return LoadedMap.from_snapshot(
+        MapSnapshot(Path("m"), table, places, ("attic", "cellar"), edges)
+    )
 
 
 @pytest.mark.parametrize(("top_room", "state"), [("cellar", "localized"), ("attic", "ambiguous")])
@@ -153,31 +156,76 @@ def test_a_room_of_one_place_must_win_by_more_to_be_localized(top_room: str, sta
     assert localizer.map.places_per_room == {"attic": 1, "cellar": 2}
 
 
-def frame_seeing(localizer: Localizer, place_id: int, room: str, coverage: float):
-    """An observation whose only evidence is ``place_id`` at 60 inliers over ``coverage`` of
-    the horizon."""
-    from localizer.evidence import PlaceEvidence, QueryEvidence
+def frame_seeing(localizer: Localizer, seen: dict[int, tuple[float, float]]):
+    """An observation whose evidence is, for each place id of ``seen``, 60 inliers on the
+    frame's keypoints whose azimuths lie in the arc ``(from_deg, to_deg)`` of the horizon (the
+    frame is place 1's fingerprint; its first 100 keypoints only, so that any place's may stand
+    in for it)."""
+    from localizer.evidence import PlaceEvidence, QueryEvidence, azimuth_coverage
     from localizer.localizer import Observation
 
-    pairs = np.zeros((60, 2), dtype=np.int64)
-    item = PlaceEvidence(place_id, room, 80, 60, 0.0, pairs, coverage)
-    fingerprint = localizer.map.fingerprint(place_id)
-    return Observation(fingerprint, QueryEvidence((item,), {}), {})
+    fingerprint = localizer.map.fingerprint(1)
+    rays = fingerprint.rays()
+    azimuth_deg = np.degrees(np.arctan2(rays[:100, 1], rays[:100, 0])) % 360.0
+    items = []
+    for place_id, (from_deg, to_deg) in seen.items():
+        rows = np.resize(np.flatnonzero((azimuth_deg >= from_deg) & (azimuth_deg < to_deg)), 60)
+        pairs = np.stack([rows, rows], axis=1)
+        room = localizer.map.place(place_id).room
+        coverage = azimuth_coverage(rays[rows])
+        items.append(PlaceEvidence(place_id, room, 80, len(rows), 0.0, pairs, coverage))
+    return Observation(fingerprint, QueryEvidence(tuple(items), {}), {})
 
 
-@pytest.mark.parametrize(("coverage", "state"), [(0.9, "localized"), (0.4, "ambiguous")])
-def test_a_room_of_one_place_seen_on_part_of_the_horizon_is_not_localized(coverage, state):
+@pytest.mark.parametrize(("arc_deg", "state"), [(340.0, "localized"), (130.0, "ambiguous")])
+def test_a_room_seen_on_part_of_the_horizon_is_not_localized(arc_deg, state):
     localizer = Localizer(one_and_two_place_map())
     localizer.reset({"attic": 100.0, "cellar": 1.0})  # sure enough for a one-place room
-    localizer.latest = frame_seeing(localizer, 1, "attic", coverage)
+    localizer.latest = frame_seeing(localizer, {1: (0.0, arc_deg)})
     assert localizer.belief().state is LocalizationState(state)
 
 
-def test_a_room_of_two_places_is_localized_whatever_the_coverage():
+def test_a_room_of_two_places_seen_through_its_door_from_both_is_not_localized():
     localizer = Localizer(one_and_two_place_map())
     localizer.reset({"cellar": 100.0, "attic": 1.0})
-    localizer.latest = frame_seeing(localizer, 2, "cellar", 0.3)
+    localizer.latest = frame_seeing(localizer, {2: (0.0, 100.0), 3: (20.0, 130.0)})
+    assert localizer.belief().state is LocalizationState.AMBIGUOUS
+    assert localizer.unseen_room() == "cellar"  # the loop homes to one of its places
+
+
+def test_a_room_whose_places_are_each_seen_on_half_the_horizon_is_seen_all_round():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"cellar": 100.0, "attic": 1.0})
+    localizer.latest = frame_seeing(localizer, {2: (0.0, 170.0), 3: (180.0, 350.0)})
     assert localizer.belief().state is LocalizationState.LOCALIZED
+    assert localizer.unseen_room() is None
+
+
+def frame_odds(localizer: Localizer, frame) -> float:
+    """How many times more likely ``frame`` is in the cellar than in the attic."""
+    likelihood = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
+    return likelihood["cellar"] / likelihood["attic"]
+
+
+def test_a_room_seen_through_its_door_is_at_most_the_ratio_likelier_than_the_room_beyond():
+
+    localizer = Localizer(one_and_two_place_map(edges=(("attic", "cellar"),)))
+    through_the_door = frame_seeing(localizer, {2: (0.0, 130.0)})
+    assert frame_odds(localizer, through_the_door) == pytest.approx(PARTIAL_VIEW_RATIO)
+
+
+def test_a_room_seen_all_round_is_not_shared_with_the_room_it_opens_onto():
+
+    localizer = Localizer(one_and_two_place_map(edges=(("attic", "cellar"),)))
+    inside = frame_seeing(localizer, {2: (0.0, 340.0)})
+    assert frame_odds(localizer, inside) > 10 * PARTIAL_VIEW_RATIO
+
+
+def test_a_room_seen_on_part_of_the_horizon_shares_nothing_with_a_room_it_does_not_open_onto():
+
+    localizer = Localizer(one_and_two_place_map())  # no door between them
+    partial = frame_seeing(localizer, {2: (0.0, 130.0)})
+    assert frame_odds(localizer, partial) > 10 * PARTIAL_VIEW_RATIO
 
 
 def test_a_frame_where_the_robot_homed_to_a_rooms_one_place_favours_it_by_at_most_the_cap():
@@ -186,7 +234,7 @@ def test_a_frame_where_the_robot_homed_to_a_rooms_one_place_favours_it_by_at_mos
     from localizer.localizer import HOMED_ONE_PLACE_RATIO
 
     localizer = Localizer(one_and_two_place_map())
-    frame = frame_seeing(localizer, 1, "attic", 0.9)
+    frame = frame_seeing(localizer, {1: (0.0, 340.0)})
     seen = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
     homed = with_field(frame, at_place=1)
     held = dict(zip(localizer.map.rooms, localizer.frame_likelihood(homed), strict=True))
@@ -204,7 +252,7 @@ def test_doubting_a_room_takes_back_its_lead_over_the_likeliest_other():
 
 def test_a_doubted_room_gains_nothing_from_frames_until_the_belief_starts_afresh():
     localizer = Localizer(one_and_two_place_map())
-    frame = frame_seeing(localizer, 1, "attic", 0.9)  # 60 inliers with the attic's place
+    frame = frame_seeing(localizer, {1: (0.0, 340.0)})  # 60 inliers with the attic's place
     localizer.doubt("attic")  # its check did not arrive: the frame may be an unknown twin's
     held = dict(zip(localizer.map.rooms, localizer.frame_likelihood(frame), strict=True))
     assert held["attic"] == pytest.approx(held["cellar"])
@@ -225,7 +273,7 @@ def test_a_frame_where_the_robot_homed_to_a_place_of_a_room_of_two_is_read_in_fu
     from dataclasses import replace as with_field
 
     localizer = Localizer(one_and_two_place_map())
-    frame = frame_seeing(localizer, 2, "cellar", 0.9)
+    frame = frame_seeing(localizer, {2: (0.0, 340.0)})
     np.testing.assert_allclose(
         localizer.frame_likelihood(with_field(frame, at_place=2)),
         localizer.frame_likelihood(frame),
@@ -234,7 +282,7 @@ def test_a_frame_where_the_robot_homed_to_a_place_of_a_room_of_two_is_read_in_fu
 
 def seen_at(localizer: Localizer, x_m: float, y_m: float):
     """The cellar frame of :func:`frame_seeing`, captured at odometry ``(x_m, y_m)``."""
-    return replace(frame_seeing(localizer, 2, "cellar", 0.9), odometry=Pose2D(x_m, y_m, 0.0))
+    return replace(frame_seeing(localizer, {2: (0.0, 340.0)}), odometry=Pose2D(x_m, y_m, 0.0))
 
 
 def test_a_frame_from_the_spot_of_the_latest_replaces_its_evidence():
@@ -254,7 +302,7 @@ def test_a_frame_from_elsewhere_adds_its_evidence_to_the_latest():
 
 def test_frames_of_unknown_odometry_whose_images_differ_each_add_their_evidence():
     localizer = Localizer(one_and_two_place_map())
-    frame = frame_seeing(localizer, 2, "cellar", 0.9)
+    frame = frame_seeing(localizer, {2: (0.0, 340.0)})
     other_view = replace(frame, fingerprint=localizer.map.fingerprint(3))
     once = localizer.update(frame).as_dict()
     twice = localizer.update(other_view).as_dict()
@@ -263,7 +311,7 @@ def test_frames_of_unknown_odometry_whose_images_differ_each_add_their_evidence(
 
 def test_a_frame_of_unknown_odometry_whose_image_repeats_the_latest_replaces_its_evidence():
     localizer = Localizer(one_and_two_place_map())
-    frame = frame_seeing(localizer, 2, "cellar", 0.9)
+    frame = frame_seeing(localizer, {2: (0.0, 340.0)})
     once = localizer.update(frame).as_dict()
     again = localizer.update(frame).as_dict()  # a camera alone, asked twice
     assert again == pytest.approx(once)
