@@ -362,11 +362,11 @@ class Localizer:
         return model.from_counts(counts, aliased, compared, read)
 
     def _through_doors(self, likelihood: np.ndarray, observation: Observation) -> np.ndarray:
-        """``likelihood`` with each room raised to :data:`PARTIAL_VIEW_RATIO` times less than
-        any room it opens onto (:attr:`doors`) that ``observation`` sees on less than
-        ``min_coverage`` of its horizon (:func:`room_coverages`): a room seen on part of the
-        horizon is what a robot sees of it from its door, standing in the next room, as much
-        as from inside it. On world seed 49's house recorded two places per room, four robots
+        """``likelihood`` with the rooms that a room seen on less than ``min_coverage`` of
+        ``observation``'s horizon (:func:`room_coverages`) opens onto (:attr:`doors`) raised to
+        at least that room's likelihood over :data:`PARTIAL_VIEW_RATIO`: a room seen on part of
+        the horizon is what a robot sees of it from its door, standing in the next room, as
+        much as from inside it. On world seed 49's house recorded two places per room, four robots
         in the kitchen saw the hall's place on 0.37-0.54 of the horizon (19-45 inliers; the
         kitchen's own places at 3-7) and said the hall, 0.997-1.0."""
         if len(likelihood) < 2:
@@ -579,7 +579,7 @@ class Localizer:
         :class:`~localizer.belief.StateThresholds`); True before any frame. A robot in a
         doorway, or in the next room looking through the door, sees a room on half the horizon
         or less, whichever of its places it matches: taken for one place only, the test let
-        a room of two places be said from its door (the first looks of world seeds 35-47's
+        a room of two places be said from its door (the first looks of world seeds 35-45's
         recorded maps, two places per room: 14 sure and wrong, 3 with the union of the
         places; docs/results.md)."""
         if self.latest is None:
