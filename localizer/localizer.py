@@ -229,6 +229,21 @@ class Observation:
     at_place: int | None = None
     odometry: Pose2D | None = None
 
+    @cached_property
+    def room_coverages(self) -> dict[str, float]:
+        """For each room with inliers in this frame, the share of its horizon (0 to 1) that
+        those inliers, with all of the room's places together, cover
+        (:func:`~localizer.evidence.azimuth_coverage`); computed once per frame (the belief
+        reads it on every request)."""
+        rows: dict[str, list[np.ndarray]] = {}
+        for item in self.evidence.places:
+            if len(item.inlier_pairs):
+                rows.setdefault(item.room, []).append(item.inlier_pairs[:, 0])
+        if not rows:
+            return {}
+        rays = self.fingerprint.rays()
+        return {room: azimuth_coverage(rays[np.concatenate(parts)]) for room, parts in rows.items()}
+
 
 def to_grey(image: np.ndarray) -> np.ndarray:
     """A uint8 grey panorama from a grey or BGR one (``ValueError`` for other shapes)."""
@@ -237,20 +252,6 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     if image.ndim == 3 and image.shape[2] == 3:
         return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     raise ValueError(f"a panorama must be H x W or H x W x 3, got shape {image.shape}")
-
-
-def room_coverages(observation: Observation) -> dict[str, float]:
-    """For each room with inliers in ``observation``, the share of its horizon (0 to 1) that
-    those inliers, with all of the room's places together, cover
-    (:func:`~localizer.evidence.azimuth_coverage`)."""
-    rows: dict[str, list[np.ndarray]] = {}
-    for item in observation.evidence.places:
-        if len(item.inlier_pairs):
-            rows.setdefault(item.room, []).append(item.inlier_pairs[:, 0])
-    if not rows:
-        return {}
-    rays = observation.fingerprint.rays()
-    return {room: azimuth_coverage(rays[np.concatenate(parts)]) for room, parts in rows.items()}
 
 
 class Localizer:
@@ -363,17 +364,18 @@ class Localizer:
 
     def _through_doors(self, likelihood: np.ndarray, observation: Observation) -> np.ndarray:
         """``likelihood`` with the rooms that a room seen on less than ``min_coverage`` of
-        ``observation``'s horizon (:func:`room_coverages`) opens onto (:attr:`doors`) raised to
-        at least that room's likelihood over :data:`PARTIAL_VIEW_RATIO`: a room seen on part of
-        the horizon is what a robot sees of it from its door, standing in the next room, as
-        much as from inside it. On world seed 49's house recorded two places per room, four robots
-        in the kitchen saw the hall's place on 0.37-0.54 of the horizon (19-45 inliers; the
-        kitchen's own places at 3-7) and said the hall, 0.997-1.0."""
+        ``observation``'s horizon (:attr:`Observation.room_coverages`) opens onto
+        (:attr:`doors`) raised to at least that room's likelihood over
+        :data:`PARTIAL_VIEW_RATIO`: a room seen on part of the horizon is what a robot sees of
+        it from its door, standing in the next room, as much as from inside it. On world seed
+        49's house recorded two places per room, four robots in the kitchen saw the hall's
+        place on 0.37-0.54 of the horizon (19-45 inliers; the kitchen's own places at 3-7) and
+        said the hall, 0.997-1.0."""
         if len(likelihood) < 2:
             return likelihood
         limit = self.config.thresholds.min_coverage
         rooms = self.map.rooms
-        coverages = room_coverages(observation)
+        coverages = observation.room_coverages
         partial = [
             room for room, share in coverages.items() if share < limit and self.doors.get(room)
         ]
@@ -584,7 +586,7 @@ class Localizer:
         places; docs/results.md)."""
         if self.latest is None:
             return True
-        coverage = room_coverages(self.latest).get(room, 0.0)
+        coverage = self.latest.room_coverages.get(room, 0.0)
         return coverage >= self.config.thresholds.min_coverage
 
     def _thresholds(self, probabilities: np.ndarray) -> StateThresholds:
