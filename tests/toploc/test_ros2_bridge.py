@@ -88,18 +88,23 @@ class Graph:
         replies = self.router.liveliness().get(f"@ros2_lv/{DOMAIN}/**", timeout=1.0)
         return [str(reply.ok.key_expr) for reply in replies if reply.ok is not None]
 
-    def token(self, kind: str, name: str) -> str | None:
-        """The token of a node (``NN``, by node name) or endpoint (by fully qualified name)."""
+    def token(self, kind: str, name: str, within_s: float = 0.0) -> str | None:
+        """The token of a node (``NN``, by node name) or endpoint (by fully qualified name);
+        asked again until ``within_s`` has passed (each liveliness query waits up to 1 s: on a
+        loaded machine one query may end before the router has every token)."""
         chunk, wanted = (8, name) if kind == "NN" else (9, name.replace("/", "%"))
-        found = [
-            token for token in self.tokens()
-            if token.split("/")[5] == kind and token.split("/")[chunk] == wanted
-        ]  # fmt: skip
-        return found[0] if found else None
+        deadline = time.monotonic() + within_s
+        while True:
+            found = [
+                token for token in self.tokens()
+                if token.split("/")[5] == kind and token.split("/")[chunk] == wanted
+            ]  # fmt: skip
+            if found or time.monotonic() >= deadline:
+                return found[0] if found else None
 
     def data_key(self, kind: str, name: str) -> str:
         """A topic's or service's data key, from its token as a ROS graph cache reads it."""
-        token = self.token(kind, name)
+        token = self.token(kind, name, within_s=10.0)
         assert token is not None, f"no {kind} token for {name}"
         parts = token.split("/")
         return f"{parts[1]}/{parts[9].replace('%', '/')[1:]}/{parts[10]}/{parts[11]}"
