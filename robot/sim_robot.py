@@ -283,6 +283,15 @@ class SimulatedRobot:
         room = self.world.room_at(self._pose.x_m, self._pose.y_m)
         return None if room is None else room.name
 
+    def carry(self, pose: Pose2D) -> None:
+        """Put the robot at ``pose`` (building frame) without its odometry knowing: a
+        kidnapping. ``ValueError`` if ``pose`` is outside every room or collides."""
+        if not self.obstacles.free(np.array([[pose.x_m, pose.y_m]]))[0]:
+            raise ValueError(f"cannot carry the robot to ({pose.x_m}, {pose.y_m}) m: not free")
+        self._pose = Pose2D(
+            float(pose.x_m), float(pose.y_m), float(wrap_angle_rad(pose.heading_rad))
+        )
+
     # -- the Robot protocol -------------------------------------------------------------------
 
     def capture(self) -> Capture:

@@ -142,6 +142,23 @@ def test_refuses_a_start_in_collision(square):
         SimulatedRobot(square, Pose2D(-1.0, 1.0), camera=SMALL)
 
 
+def test_a_carried_robot_stands_where_it_was_put_and_its_odometry_never_knew(square):
+    robot = SimulatedRobot(square, Pose2D(2.5, 1.8, 0.0), camera=SMALL)
+    robot.move(0.0, 0.5)
+    odometry = robot.odometry()
+    robot.carry(Pose2D(3.0, 1.8, math.pi / 2))
+    pose = robot.true_pose
+    assert (pose.x_m, pose.y_m, pose.heading_rad) == pytest.approx((3.0, 1.8, math.pi / 2))
+    assert robot.odometry() == odometry
+
+
+def test_a_robot_cannot_be_carried_into_a_wall_or_out_of_the_world(square):
+    robot = SimulatedRobot(square, Pose2D(2.5, 1.8, 0.0), camera=SMALL)
+    with pytest.raises(ValueError, match=r"\(-1\.0, 1\.0\) m"):
+        robot.carry(Pose2D(-1.0, 1.0))
+    assert (robot.true_pose.x_m, robot.true_pose.y_m) == (2.5, 1.8)
+
+
 def test_capture_has_the_camera_size(square):
     grey = SimulatedRobot(square, Pose2D(2.5, 1.8), camera=SMALL, grey=True).capture()
     assert grey.image.shape == (24, 128) and grey.image.dtype == np.uint8
