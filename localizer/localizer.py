@@ -56,7 +56,7 @@ like the place: in its room, or in a twin the calibration could not find, one pl
 giving it nothing to compare (a house recorded one place per room, world seed 21: the twin
 bedrooms' places verified each other at 4–5 spread inliers, as chance does; two robots in
 bedroom_b homed to bedroom_a's place and the frame there said bedroom_a, 0.998). The room is
-then checked by a recorded route (:mod:`localizer.active`), which a twin's different door
+then checked by a recorded route (:mod:`localizer.route_checks`), which a twin's different door
 tells apart."""
 
 PARTIAL_VIEW_RATIO = 3.0
@@ -516,7 +516,7 @@ class Localizer:
 
     def update_rooms(self, likelihood: Mapping[str, float]) -> RoomBelief:
         """Fold a likelihood given per room (a room not named: 1) into the belief, as a check
-        that is no frame does (a recorded route driven, :mod:`localizer.active`); the latest
+        that is no frame does (a recorded route driven, :mod:`localizer.route_checks`); the latest
         observation stays. ``ValueError`` for an unknown room or a likelihood that is not a
         finite number >= 0."""
         unknown = set(likelihood) - set(self.map.rooms)

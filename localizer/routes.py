@@ -7,7 +7,7 @@ legs every pose is in one frame, the odometry frame of the drive that recorded t
 on its way to the next room) join there too, so a route need not retrace the drive's detours
 (:func:`leg_graph`). A :class:`Route` is such a path, from a start place to an end place, as
 the positions to drive through. Look-alike rooms that no place tells apart are told apart this way
-(:mod:`localizer.active`): a robot that homed to a place of one twin drives that twin's route
+(:mod:`localizer.route_checks`): a robot that homed to a place of one twin drives that twin's route
 out of the room; if it is in the other twin, the same drive ends somewhere else.
 
 :func:`leg_graph`, :func:`route_out` and :func:`route_into` are pure; :func:`drive_route`

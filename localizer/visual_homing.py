@@ -336,6 +336,11 @@ class HomingParams:
             )
 
 
+CANCELLED = "cancelled"
+"""The :attr:`HomingResult.reason` of a drive someone cancelled (the service's homing node):
+no further drive follows."""
+
+
 @dataclass(frozen=True)
 class HomingResult:
     """How a homing run ended.

@@ -6,20 +6,11 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import (
-    CANCELLED,
-    ENDINGS,
-    ActiveParams,
-    RouteCheck,
-    localize_actively,
-    rooms_to_check,
-    told_outcomes,
-    top_two_alike,
-)
+from localizer.active import ENDINGS, ActiveParams, localize_actively, top_two_alike
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
-from localizer.visual_homing import HomingResult, drive_home
+from localizer.visual_homing import CANCELLED, HomingResult, drive_home
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
@@ -261,37 +252,6 @@ def test_a_route_check_is_folded_in_as_a_likelihood_per_room(localizer):
         localizer.update_rooms({"office_a": -1.0})
 
 
-def test_active_params_refuse_route_rates_that_tell_nothing():
-    with pytest.raises(ValueError, match="route_false_rate < route_hit_rate"):
-        ActiveParams(route_hit_rate=0.5, route_false_rate=0.5)
-
-
-def test_a_room_checked_once_is_checked_after_its_rival_whatever_came_out(localizer):
-    localizer.reset()
-    belief = localizer.update_rooms({"office_a": 30.0, "office_b": 20.0})
-    assert rooms_to_check(belief, {}) == ["office_a", "office_b"]
-    assert rooms_to_check(belief, {"office_a": 1}) == ["office_b", "office_a"]
-
-
-def check(room: str, confirmed: bool, back_room: str | None, afresh: bool = False) -> RouteCheck:
-    return RouteCheck(room, 1, 2, confirmed, 10.0, back_room=back_room, afresh=afresh)
-
-
-def test_a_rooms_checks_tell_what_came_back_to_it():
-    checks = [check("office_a", False, "office_a"), check("office_b", True, "office_b")]
-    assert told_outcomes(checks, "office_a") == {False}
-    assert told_outcomes(checks, "office_b") == {True}
-    assert told_outcomes([check("office_a", True, None)], "office_a") == frozenset()
-    assert told_outcomes([check("office_a", True, "office_b")], "office_a") == frozenset()
-
-
-def test_checks_before_the_belief_started_afresh_tell_nothing_any_more():
-    missed = check("office_b", False, "office_b")
-    lost_way = check("office_a", True, None, afresh=True)
-    assert told_outcomes([missed, lost_way], "office_b") == frozenset()
-    assert told_outcomes([lost_way, missed], "office_b") == {False}
-
-
 def test_the_top_two_rooms_are_alike_when_one_group_of_look_alikes_holds_both():
     """office_b looks like office_a and like the storage room: a group of three, read together,
     whose top two need not be a pair."""
@@ -304,12 +264,6 @@ def test_the_top_two_rooms_are_alike_when_one_group_of_look_alikes_holds_both():
     assert top_two_alike(belief(0.01, 0.33, 0.32, 0.34), rooms, group)  # storage, office_a
     assert not top_two_alike(belief(0.40, 0.30, 0.20, 0.10), rooms, group)  # corridor first
     assert not top_two_alike(belief(0.01, 0.33, 0.32, 0.34), rooms, ())
-
-
-def test_only_likely_rooms_are_checked_by_a_route(localizer):
-    localizer.reset()
-    belief = localizer.update_rooms({"office_a": 100.0})
-    assert rooms_to_check(belief, {"office_a": 1}) == ["office_a"]
 
 
 def test_a_drive_that_gives_up_brings_the_robot_back_to_where_it_looked(localizer):

@@ -369,7 +369,7 @@ def test_checks_of_one_room_that_all_arrive_count_once(driven):
     assert arrived.count("office_a") >= 2
     # one route's worth of evidence (64 when each arrival was folded in), at the rates of a
     # hall both twins open onto: every route of either office ends in the corridor
-    params = ActiveParams()
+    params = ActiveParams().routes
     once = params.hall_route_hit_rate / params.hall_route_false_rate  # 1.6 (8 before)
     assert odds(result.final, "office_a", "office_b") == pytest.approx(once, rel=0.05)
 

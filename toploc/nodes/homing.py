@@ -54,9 +54,14 @@ from typing import Any, TypeVar
 
 import zenoh
 
-from localizer.active import CANCELLED
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
-from localizer.visual_homing import HomingParams, HomingProgress, HomingResult, drive_home
+from localizer.visual_homing import (
+    CANCELLED,
+    HomingParams,
+    HomingProgress,
+    HomingResult,
+    drive_home,
+)
 from mapdb.records import Fingerprint
 from toploc import bus
 from toploc.bus import schemas

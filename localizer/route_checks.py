@@ -1,0 +1,684 @@
+"""Checking a likely room by a recorded route (:mod:`localizer.routes`): the drive the active
+loop (:mod:`localizer.active`) makes when no place tells the likely rooms apart (look-alike
+rooms that look alike from every place of theirs).
+
+The robot homes to a place of the room, drives the route the map recorded from there into
+another room and homes to the route's end place. If it started in that room, it is at the end
+place when the route ends and homes there at once; if it started in a look-alike, the same
+drive ends elsewhere (:class:`RouteCheck`). The robot drives back through the views it took on
+the way out, homing to each, to the start; there the check is folded into the belief. A route
+that ends in a room its room opens onto (a hall, where a look-alike's door may repeat the view
+a look-alike's offset along) goes on from the end place, re-anchored there, to a room beyond.
+A check that arrived at a place beyond the rooms its room opens onto fixed the robot's
+odometry in the map's frame there: if the way back ends where the map has the start place, the
+robot retraced the map's route and is in that room (from a look-alike it ends a look-alike's
+offset away). If the homing to the end place arrived but late, the robot is at a known place
+of a room without look-alike, and drives a recorded route from there into the look-alike
+instead: the room whose place it then reaches at once gains the odds.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from localizer.belief import RoomBelief
+from localizer.localizer import Localizer, Observation
+from localizer.robot_protocol import Pose2D, Robot
+from localizer.routes import (
+    ROUTE_MAX_M,
+    DriveFrame,
+    Route,
+    drive_route,
+    route_beyond_m,
+    route_into,
+    route_out,
+    route_through,
+    shared_rooms,
+)
+from localizer.visual_homing import (
+    CANCELLED,
+    HomingError,
+    HomingParams,
+    HomingResult,
+    StepParams,
+    drive_home,
+    matched_inliers,
+)
+from mapdb.records import Fingerprint, Place
+
+LIKELY_SHARE = 0.1
+"""A room at least this share of the top room's probability is checked by a route too (a
+refuted look-alike tells as much as a confirmed top room)."""
+
+
+@dataclass(frozen=True)
+class RouteCheckParams:
+    """How a room is checked by a recorded route (:class:`RouteCheck`, :func:`check_route`): routes
+    up to ``route_max_m`` long; the robot "arrived at once" when homing to the route's end place
+    arrives after at most ``route_slack_m`` plus ``route_slack_share`` of the route's length
+    (the odometry's drift over the route), never more than ``route_slack_max_m``, its odometry
+    then has it within that drift of the end place too, and the look there names the end place's
+    room. The cap: a route driven from a twin can end where the end place is in sight a few
+    metres on (world seed 31's house: bedroom_b's 11 m route into the living room, driven from
+    bedroom_a, stopped at the hall's end, and homing reached the living room's place after
+    4.0 m, within the 4.3 m the share allowed); of 885 checks that arrived from the route's own room
+    in sessions 23-26's runs, 15 took more than 2.5 m, of 257 from elsewhere 20.
+    ``route_hit_rate``: how often that happens when the robot did start in the route's room;
+    ``route_false_rate``: when it started elsewhere. A check that arrives multiplies its room's
+    odds by their ratio (8), one that does not by ``(1 - hit) / (1 - false)`` (0.22), once the
+    robot is back at the start. On the maps of world seeds 17–20 recorded on one drive (K = 1,
+    2, 3; session 21's runs of ``benchmarks/bench_recorded_maps.py``), 205 of the 244 checks
+    back at the start arrived when the robot was in the route's room (0.84, 90 % interval
+    0.80–0.88), and 4 of 166 when it was in another (0.024, interval 0.008–0.054): the hit rate
+    is the interval's low end, and the false rate stays at the 0.1 set on seeds 14 and 15
+    (session 20), twice the interval's high end, as a twin whose doors stand alike fools every
+    check of it, not one in forty. So one check that arrives leaves the belief ambiguous (8 <
+    the localized ratio 10); with its look-alike's check that did not, 36; one whose way back
+    retraced the map's route (:func:`_retraced`), 64. ``hall_route_hit_rate`` and
+    ``hall_route_false_rate`` take their place for a route that ends in the hall the room's
+    look-alikes open onto too (:func:`shared_rooms`) when none of them has a recorded route
+    beyond it: driven from a twin, such a route ends in that hall as well, a twin's offset along
+    it, and where the hall looks alike at both doors it arrives there too. Over the first checks
+    of a room in world seeds 27–29's runs, hall routes arrived in 42 of 66 checks from their own
+    room and 30 of 78 from elsewhere (0.64 and 0.38; on seven of thirteen maps of seeds 25–29
+    they told the truth, on six they told nothing). Where a look-alike has a route beyond, the
+    pair's two checks tell together: where one arrived and the other did not, the robot was in
+    the room of the one that arrived 76 times in 77 (seeds 25–30), so such a pair keeps the
+    rates above (docs/results.md, session 25). The way back is checked the same way: homing to
+    the place the drive back leads to arrives at once, or the robot may be in any room and the
+    belief starts afresh from the next look (two kidnappings of world seed 13 ended sure of a
+    room the robot was not in, after a way back that failed)."""
+
+    route_max_m: float = ROUTE_MAX_M
+    route_hit_rate: float = 0.8
+    route_false_rate: float = 0.1
+    hall_route_hit_rate: float = 0.65
+    hall_route_false_rate: float = 0.4
+    route_slack_m: float = 1.0
+    route_slack_share: float = 0.3
+    route_slack_max_m: float = 2.5
+
+    def __post_init__(self) -> None:
+        for name in ("route", "hall_route"):
+            hit, false = getattr(self, f"{name}_hit_rate"), getattr(self, f"{name}_false_rate")
+            if not 0.0 < false < hit < 1.0:
+                raise ValueError(
+                    f"need 0 < {name}_false_rate < {name}_hit_rate < 1, got {false} and {hit}"
+                )
+
+
+@dataclass(frozen=True)
+class RouteCheck:
+    """One room checked by a recorded route: the robot homed to place ``start`` of ``room``,
+    drove the route to place ``end`` (of another room), homed to it, and drove back;
+    ``confirmed``: the homing to ``end`` arrived at once and the look there named ``end``'s
+    room (the robot was where the route ends if it started in ``room``); ``distance_m``:
+    odometric metres of the whole check; ``end_inliers``: the spread inliers of that look
+    with ``end``'s view (0 if the homing did not arrive);
+    ``end_homing_m``: how far the homing to ``end`` drove (0: the route was not driven);
+    ``back_room``: the room whose place the robot came back to at once (``room``, through the
+    views it took on the way out, or ``room``'s look-alike by a recorded route from ``end``),
+    where the check was folded into the belief (unless an earlier check of the room came out
+    the same, see :func:`check_route`); None: it did not, and the belief started afresh or
+    was kept. ``started``: homing to ``start`` arrived and the route was driven; ``afresh``:
+    the robot did not get back to a place it knew, and the belief started afresh (what earlier
+    checks told is gone with it); ``via``: the place of a room ``room`` opens onto that the
+    route reached at once and went on from to ``end`` (None: it went straight to ``end``;
+    :func:`_onward`)."""
+
+    room: str
+    start: int
+    end: int
+    confirmed: bool
+    distance_m: float
+    end_inliers: float = 0.0
+    end_homing_m: float = 0.0
+    back_room: str | None = None
+    started: bool = True
+    afresh: bool = False
+    via: int | None = None
+
+
+def told_outcomes(checks: Sequence[RouteCheck], room: str) -> frozenset[bool]:
+    """The outcomes (:attr:`RouteCheck.confirmed`) the checks of ``room`` have told about it,
+    folded in or already known: of the checks that came back to ``room``, since the belief
+    last started afresh (:attr:`RouteCheck.afresh`: what a check told before then was about a
+    belief that is gone, and a later check that comes out the same tells it again)."""
+    last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
+    return frozenset(
+        check.confirmed
+        for check in checks[last + 1 :]
+        if check.room == room and check.back_room == room
+    )
+
+
+def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
+    """The likely rooms (at least :data:`LIKELY_SHARE` of the top room's probability) in the
+    order to check them by a route: the rooms checked fewer times (``checked``, by room) first,
+    then the more likely. A room's checks share their end place and its view, and fail or pass
+    together: a check that arrived is followed by its rival's, not by the same room's again
+    (world seed 27's house, two places per room: the twin bedrooms open onto one hall whose
+    doors repeat every 6.6 m, and a robot in bedroom_b drove bedroom_a's two routes to the same
+    hall place, arrived both times and ended sure of bedroom_a, 0.985, in 4 of 5 kidnappings;
+    the rival's check, where its room has a route, can tell the other way). Likewise after a
+    check that did not arrive (on world seed 14, each of the 10 robots in office_b spent its
+    first two of four drives on office_a's routes)."""
+    top_p = belief.top[1]
+    likely = [(room, p) for room, p in belief.ranked() if p >= LIKELY_SHARE * top_p]
+    return [room for room, _ in sorted(likely, key=lambda rp: checked.get(rp[0], 0))]
+
+
+def likely_twin(
+    belief: RoomBelief, room: str, lookalikes: Mapping[str, frozenset[str]]
+) -> str | None:
+    """The most likely of ``room``'s look-alikes (at least :data:`LIKELY_SHARE` of the top
+    room's probability), or None."""
+    twins = lookalikes.get(room, frozenset())
+    top_p = belief.top[1]
+    return next(
+        (name for name, p in belief.ranked() if name in twins and p >= LIKELY_SHARE * top_p), None
+    )
+
+
+def route_to_check(
+    localizer: Localizer,
+    belief: RoomBelief,
+    observation: Observation,
+    tried: set[int],
+    checked: Mapping[str, int],
+    params: RouteCheckParams,
+) -> tuple[Place, Route] | None:
+    """A place to check a likely room from, and its recorded route out of the room to a room
+    that has no look-alike. The likely rooms are taken in :func:`rooms_to_check`'s order
+    (``checked``: checks per room so far), those checked as often as each other first by a
+    route that ends in a room their look-alikes do not open onto (:func:`shared_rooms`), then
+    by any; in each, the places with a route and a heading, not tried yet, from the one the
+    latest frame matched best. None if there is none. A room whose look-alike has a shorter
+    route beyond is checked by its shortest route, into the hall too: where the pair's two
+    checks disagree, the one beyond tells, and the hall check agrees with it (76 of 77 such
+    pairs right, docs/results.md); a longer route drifts more (world seed 31's building: with
+    the legs joined, office_a's 12 m route to the kitchen arrived from office_a in 5 of 10
+    first checks; its 3 m route into the corridor, before, in 10 of the 10 that started)."""
+    counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
+    graph, places = localizer.map.legs, localizer.map.places
+    # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
+    # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
+    # bathroom_a and bedroom_a: a route between the two ends alike in both)
+    leave = {name for name, partners in localizer.lookalikes.items() if partners}
+    doors = localizer.doors
+    rooms = rooms_to_check(belief, checked)
+    beyond_m = functools.cache(
+        lambda room: route_beyond_m(
+            graph, places, room, localizer.lookalikes, doors, params.route_max_m
+        )
+    )
+    for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
+        starts = {
+            room: sorted(
+                (
+                    place
+                    for place in places
+                    if place.room == room
+                    and place.id in graph
+                    and place.heading_deg is not None
+                    and place.id not in tried
+                ),
+                key=lambda q: (-counts.get(q.id, 0.0), q.id),
+            )
+            for room in tier
+        }
+        for strict in (True, False):
+            for room, room_starts in starts.items():
+                leave_room = leave | {room}
+                if strict:
+                    twins = localizer.lookalikes.get(room, frozenset())
+                    if any(beyond_m(twin) < beyond_m(room) for twin in twins):
+                        continue  # the twin's route beyond tells for the pair: any route here
+                    leave_room |= shared_rooms(doors, room, twins)
+                for place in room_starts:
+                    route = route_out(graph, places, place.id, leave_room, params.route_max_m)
+                    if route is not None:
+                        return place, route
+    return None
+
+
+def check_route(
+    localizer: Localizer,
+    robot: Robot,
+    home: Callable[[int], HomingResult],
+    start: Place,
+    route: Route,
+    rival: str | None,
+    params: RouteCheckParams,
+    homing: HomingParams,
+    told: frozenset[bool] = frozenset(),
+) -> tuple[RouteCheck, int, HomingResult, int | None]:
+    """Check ``start``'s room by ``route`` (see :class:`RouteCheck`; ``home(place_id)`` drives
+    the robot to a place, ``homing`` the settings of the homings to the views it takes on the
+    way) and fold the result into the localizer's belief. The result is folded in only if no earlier
+    check of the room came out the same (``told``: the outcomes, arrived or not, of the
+    earlier checks of the room that came back): the checks of one room fail or pass together
+    (a door its homing does not pass, odometry that drifts the same way on the same leg, an
+    end place whose view repeats where the twin's route ends). Two misses taken as independent
+    made a robot in the room sure of its twin (world seed 25's house, two places per room: two
+    checks of the bedroom the robot was in failed, 0.54 for it became 0.034); two arrivals
+    made a robot sure of the twin it was not in (world seed 27's house, see
+    :func:`rooms_to_check`). The way back: if homing to the route's end
+    place arrived but not at once, by a recorded route from there into ``rival`` (``start``'s
+    likely look-alike, if any); otherwise back along the views taken on the way out, to
+    ``start``, where a check that arrived at once is folded in again if the robot stands where
+    the map has ``start`` (:func:`_retraced`). A check whose homing to ``start`` does not
+    arrive drives no route: the robot homes back to the place it stood at, if it stood at one.
+    A route that ends in a room ``start``'s room opens onto, reached at once, goes on from its
+    end place to a room beyond (:func:`_onward`), and the check is of the two legs together.
+    Returns the check, the frames captured, the homing to the route's end place and the place
+    the robot homed to last (None: it stands where no homing arrived), to look from."""
+    assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
+    distance, frames = 0.0, 0
+    stood_at = localizer.latest.at_place if localizer.latest is not None else None
+    to_start = home(start.id)
+    distance += to_start.distance_m
+    frames += len(to_start.lengths)
+    confirmed, at_end, end_inliers, back_room, afresh = False, to_start, 0.0, None, False
+    via: int | None = None
+    homed_to = start.id if to_start.arrived else None  # where the robot stands at the end
+    stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
+    view = localizer.map.fingerprint(start.id)
+    frame = _frame_by_view(robot, view, stored, to_start, homing.step)
+    if frame is not None and to_start.arrived:  # a route driven from elsewhere tells nothing
+        marks: list[_Mark] = []
+
+        def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
+            pose = frame.pose(robot.odometry())
+            marks.append(_Mark(localizer.extract(robot.capture().image), pose))
+
+        leg, leg_frame = route, frame
+        while True:
+            distance += drive_route(robot, leg, leg_frame, mark).distance_m
+            at_end = home(leg.end)
+            distance += at_end.distance_m
+            frames += len(at_end.lengths)
+            seen, end_inliers = False, 0.0
+            if at_end.arrived:
+                seen, end_inliers = _look_at_end(localizer, robot, leg.end)
+                frames += 1
+            # at once, and the look there names the end room (which has no look-alike): a
+            # homing that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the
+            # robot was not in arrived at once)
+            confirmed = seen and _at_once(at_end, leg, params, robot, leg_frame)
+            onward = None
+            if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
+                onward = _onward(localizer, robot, start.room, leg.end, at_end, params, homing.step)
+            if onward is None or at_end.reason == CANCELLED:
+                break
+            via, (leg, leg_frame) = leg.end, onward
+            route = _joined(route, leg)
+        frames += len(marks)
+        # at the end place, a known place, the robot's odometry is fixed in the map's frame:
+        # coming back to where the map has the start place, it retraced the recorded route
+        known = None
+        if confirmed and _end_fixes_the_frame(localizer, start.room, route, via):
+            known = _known_frame(localizer, robot, route.end, at_end, homing.step)
+        way_back = None
+        if seen and not confirmed and rival is not None:  # at the end place, known
+            way_back = _way_back(localizer, robot, route.end, at_end, rival, params, homing.step)
+        if at_end.reason == CANCELLED:
+            homed_to = route.end if at_end.arrived else None
+        elif way_back is not None:
+            # at the end place, in a room without a look-alike, the robot knows where it is,
+            # and a recorded route from there leads into the look-alike the check did not
+            # refute: if the robot reaches a place of it at once, it is there
+            back_route, back_frame = way_back
+            distance += drive_route(robot, back_route, back_frame).distance_m
+            back = home(back_route.end)
+            distance += back.distance_m
+            frames += len(back.lengths)
+            homed_to = back_route.end if back.arrived else None
+            if _at_once(back, back_route, params, robot, back_frame):
+                back_room = localizer.map.place(back_route.end).room
+                localizer.update_rooms({back_room: _route_ratio(params)})
+            else:  # somewhere along the way back: the look decides
+                localizer.reset()
+                afresh = True
+        else:
+            # back through the views taken on the way out, each homed to (a frame fixed at the
+            # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
+            driven_m, homings, held = _back_by_marks(localizer, robot, marks, frame, stored, homing)
+            back = home(start.id)
+            distance += driven_m + back.distance_m
+            frames += homings + len(back.lengths)
+            homed_to = start.id if back.arrived else None
+            if held and _at_once(back, route, params):  # back where it began: it tells about it
+                back_room = start.room
+                if not confirmed and localizer.alone(start.room):
+                    localizer.doubt(start.room)  # its looks may have been an unknown twin's
+                if confirmed not in told:
+                    hall = _hall_check_alone(localizer, start.room, route, params)
+                    ratio = _route_ratio(params, hall) if confirmed else _miss_ratio(params, hall)
+                    if known is not None and _retraced(known, robot, start, route, params):
+                        ratio *= _route_ratio(params)  # it is in start's room now, by the map
+                    localizer.update_rooms({start.room: ratio})
+            elif not (held and back.arrived):  # it may be in any room now: the look decides
+                localizer.reset()
+                afresh = True
+    elif not to_start.arrived and stood_at is not None and to_start.reason != CANCELLED:
+        # the check could not start: back to the place the robot stood at, not left where the
+        # homing gave up (world seed 30's house, one place per room: a robot at bedroom_b's
+        # place by its door, whose homing to the hall's place gave up in the hall, looked there
+        # and ended sure of bedroom_b, 0.977, no longer in it)
+        back = home(stood_at)
+        distance += back.distance_m
+        frames += len(back.lengths)
+        homed_to = stood_at if back.arrived else None
+    started = at_end is not to_start  # the route was driven
+    end_homing_m = at_end.distance_m if started else 0.0
+    check = RouteCheck(
+        start.room,
+        start.id,
+        route.end,
+        confirmed,
+        distance,
+        end_inliers,
+        end_homing_m,
+        back_room,
+        started,
+        afresh,
+        via,
+    )
+    return check, frames, at_end, homed_to
+
+
+def _frame_by_view(
+    robot: Robot, view: Fingerprint, pose: Pose2D, homed: HomingResult, step: StepParams
+) -> DriveFrame | None:
+    """A drive frame fixed for a robot that has just homed to ``view``, taken at ``pose`` in
+    that frame (a place's stored view and pose, or a view the robot took on the drive and its
+    odometry then): the robot at ``pose``'s position, its heading ``pose``'s turned by the
+    rotation between its last view and ``view``; None if they do not match."""
+    try:
+        _, shift_rad = matched_inliers(homed.last, view, step)
+    except HomingError:
+        return None
+    at = Pose2D(pose.x_m, pose.y_m, pose.heading_rad - shift_rad)
+    return DriveFrame(at, robot.odometry())
+
+
+@dataclass(frozen=True)
+class _Mark:
+    """A view the robot took on a route, and its pose then (drive frame, by odometry)."""
+
+    view: Fingerprint
+    pose: Pose2D
+
+
+def _back_by_marks(
+    localizer: Localizer,
+    robot: Robot,
+    marks: Sequence[_Mark],
+    frame: DriveFrame,
+    start: Pose2D,
+    homing: HomingParams,
+) -> tuple[float, int, bool]:
+    """Drive back through ``marks`` (last first) to ``start``'s position: at each, home to its
+    view and fix the drive frame again by it (``frame`` is the one of the way out). Returns the
+    odometric metres driven, the frames the homings captured, and whether the way back held:
+    the homing to the last mark homed to (the first taken, nearest the start) arrived, and so
+    did more than half of the homings to its marks (or there were none). A way back whose
+    homings to its marks do not arrive may end anywhere: on world seed 39's building (two
+    places per room), a robot in office_a whose homings to all seven of its marks gave up in
+    the seminar room and the corridor came back into office_b and homed at once to the spot of
+    office_a's place there (its check had arrived: sure and wrong, 0.997); of the other 30
+    ways back on that map, every last mark was reached. On world seed 47's building (one place
+    per room), a robot in office_a whose homings to six of its eight marks gave up reached the
+    last, nearest the start, in office_b, the start's twin: the check's miss was folded in,
+    and the belief favoured office_a, 0.82, for a robot now in office_b. Of 210 ways back in
+    six runs (seeds 37-47, both worlds, one and two places per room), 4 ended in another room
+    than they left, and had reached 0-2 of their 7-13 marks; the other 206 had reached their
+    last mark and at least 3 of 5 (60 %)."""
+    distance, frames, reached = 0.0, 0, []
+    for mark in (*reversed(marks), None):
+        here = frame.pose(robot.odometry())
+        to = (start.x_m, start.y_m) if mark is None else (mark.pose.x_m, mark.pose.y_m)
+        distance += drive_route(robot, route_through((here.x_m, here.y_m), (to,)), frame).distance_m
+        if mark is None:
+            break
+        homed = drive_home(robot, mark.view, localizer.extract, homing)
+        distance += homed.distance_m
+        frames += len(homed.lengths)
+        again = (
+            _frame_by_view(robot, mark.view, mark.pose, homed, homing.step)
+            if homed.arrived
+            else None
+        )
+        frame = again or frame
+        reached.append(homed.arrived)
+    held = not reached or (reached[-1] and 2 * sum(reached) > len(reached))
+    return distance, frames, held
+
+
+def _onward(
+    localizer: Localizer,
+    robot: Robot,
+    room: str,
+    place_id: int,
+    homed: HomingResult,
+    params: RouteCheckParams,
+    step: StepParams,
+) -> tuple[Route, DriveFrame] | None:
+    """A recorded route from place ``place_id`` (in a room ``room`` opens onto, where ``homed``
+    arrived at once) on to a room beyond: neither ``room`` nor a room it opens onto (the map's
+    edges) nor one with a look-alike; and the drive frame fixed by the place's stored view.
+    None if there is no such route (up to ``route_max_m``) or the frame cannot be fixed.
+
+    A route into a hall tells little where the hall repeats: driven from a look-alike that
+    opens onto it, it ends a look-alike's offset along the hall, where the view is the end
+    place's and homing arrives at once (world seed 39's house recorded one place per room:
+    hall checks arrived from the look-alike in 4 of 5 and ended three kidnappings sure and
+    wrong, 0.973). Re-anchored at the hall place, the drive on to a room beyond ends there
+    only if the robot was at the hall place, and from the look-alike's door it ends a
+    look-alike's offset off, where the room beyond does not repeat."""
+    doors = localizer.doors
+    leave = {name for name, twins in localizer.lookalikes.items() if twins}
+    leave |= {room, *doors.get(room, frozenset())}
+    on = route_out(localizer.map.legs, localizer.map.places, place_id, leave, params.route_max_m)
+    return _from_known(localizer, robot, place_id, homed, on, step)
+
+
+def _from_known(
+    localizer: Localizer,
+    robot: Robot,
+    place_id: int,
+    homed: HomingResult,
+    route: Route | None,
+    step: StepParams,
+) -> tuple[Route, DriveFrame] | None:
+    """``route`` (from place ``place_id``) and the drive frame fixed by the place's stored view
+    where ``homed`` arrived (:func:`_known_frame`); None if there is no route or no frame."""
+    if route is None:
+        return None
+    frame = _known_frame(localizer, robot, place_id, homed, step)
+    return None if frame is None else (route, frame)
+
+
+def _joined(first: Route, then: Route) -> Route:
+    """``first`` and ``then`` (which starts at ``first``'s end) as one route."""
+    return Route(
+        first.start,
+        then.end,
+        first.start_xy_m,
+        first.waypoints_xy_m + then.waypoints_xy_m,
+        first.length_m + then.length_m,
+    )
+
+
+def _known_frame(
+    localizer: Localizer, robot: Robot, place_id: int, homed: HomingResult, step: StepParams
+) -> DriveFrame | None:
+    """The drive frame fixed by place ``place_id``'s stored view and pose, where ``homed``
+    arrived; None if it did not, the place has no stored pose or the views do not match."""
+    place = localizer.map.place(place_id)
+    if not homed.arrived or place.x_m is None or place.y_m is None or place.heading_deg is None:
+        return None
+    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
+    return _frame_by_view(robot, localizer.map.fingerprint(place_id), stored, homed, step)
+
+
+def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
+    """Whether ``route`` out of ``room`` ends beyond the rooms ``room`` opens onto (the map's
+    edges): a hall a room opens onto may have a look-alike's door a look-alike's offset along
+    it, where the view is the end place's, and a check driven from the look-alike that stops
+    there arrives as if at the end place, with the robot's odometry then fixed a look-alike's
+    offset off; its way back to the look-alike then ends where the map has the start place
+    (world seed 39's house recorded one place per room: three robots whose checks into the
+    hall, arriving on 12-26 spread inliers, had left them sure of the twin they were not in,
+    0.973, were made surer, 0.997 for two, when the rule left out only halls the map knows
+    both twins open onto)."""
+    end_room = localizer.map.place(route.end).room
+    return end_room not in localizer.doors.get(room, frozenset())
+
+
+def _end_fixes_the_frame(localizer: Localizer, room: str, route: Route, via: int | None) -> bool:
+    """Whether reaching ``route``'s end place at once (the route out of ``room``, on from place
+    ``via`` if it went on beyond a hall) fixes the robot's odometry in the map's frame: the end
+    is beyond the hall (:func:`_beyond_the_hall`), and no twin the map does not know can stand
+    where the route, driven from ``room``'s look-alike, would end. A room of one place with no
+    look-alike (:meth:`Localizer.alone`) may have one: the map cannot tell from one view, and a
+    copy of the look-alike's wing puts the end room's twin at the look-alike's offset (world
+    seed 43's house, one place per room: bathroom_b is a copy of bathroom_a, its twin unknown
+    to the map; robots in bedroom_a drove bedroom_b's route into bathroom_b, arrived at once
+    in bathroom_a, came back "retraced" to where the map has bedroom_b's place and ended sure
+    of bedroom_b, 0.96-0.985, in 3 of 5 kidnappings). A route that went on from a hall place
+    was fixed there, in the hall both look-alikes open onto, and its end is not at a twin's
+    offset (:func:`_onward`)."""
+    if not _beyond_the_hall(localizer, room, route):
+        return False
+    return via is not None or not localizer.alone(localizer.map.place(route.end).room)
+
+
+def _retraced(
+    known: DriveFrame, robot: Robot, start: Place, route: Route, params: RouteCheckParams
+) -> bool:
+    """Whether the robot, back by its own views from the end place of ``route`` (where its
+    odometry was fixed in the map's frame, ``known``), stands where the map has ``start``,
+    within the odometry's drift over the route (as :func:`_at_once`): then the way it came is
+    the map's route, and it is in ``start``'s room. A robot that started in a look-alike and
+    still arrived at the end place comes back a look-alike's offset away."""
+    assert start.x_m is not None and start.y_m is not None
+    return _odometry_at(robot, known, (start.x_m, start.y_m), route, params)
+
+
+def _odometry_at(
+    robot: Robot,
+    frame: DriveFrame,
+    xy_m: tuple[float, float],
+    route: Route,
+    params: RouteCheckParams,
+) -> bool:
+    """Whether the robot's odometry, in drive ``frame``, puts it at ``xy_m`` (the frame's
+    metres) within the odometry's drift over ``route``."""
+    here = frame.pose(robot.odometry())
+    return math.dist((here.x_m, here.y_m), xy_m) <= _slack_m(route, params)
+
+
+def _slack_m(route: Route, params: RouteCheckParams) -> float:
+    """How far from a place reached by ``route`` the robot may stand by odometry alone: the
+    odometry's drift over the route (:class:`RouteCheckParams`)."""
+    return min(
+        params.route_slack_m + params.route_slack_share * route.length_m, params.route_slack_max_m
+    )
+
+
+def _at_once(
+    homed: HomingResult,
+    route: Route,
+    params: RouteCheckParams,
+    robot: Robot | None = None,
+    frame: DriveFrame | None = None,
+) -> bool:
+    """Whether homing to ``route``'s end place, after driving the route, arrived at once: after
+    at most the odometry's drift over the route (:class:`RouteCheckParams`), and, given the
+    ``robot`` and the drive ``frame`` the route was driven in, where its odometry has the end
+    place, within that drift too. A route that does not fit the room it is driven from (a
+    look-alike's, a twin's offset off) can stop against a wall a few metres short, in sight of
+    the end place: homing then covers the rest, at once (world seed 47's building, one place
+    per room: office_a's route into the corridor, driven from office_b, stopped against the
+    corridor's end 0.8 m from its place, 3.5 m short of it by the odometry; homing arrived
+    after 0.75 m, the check went on beyond, and the robot ended in office_b sure of office_a,
+    0.973; its odometry had it 4.1-4.2 m off the corridor's place in all four such checks of
+    that run, and at most 1.44 m off in the 146 checks that arrived at once from their own
+    room in six runs, seeds 37-47, both worlds, one and two places per room)."""
+    if not (homed.arrived and homed.distance_m <= _slack_m(route, params)):
+        return False
+    if robot is None or frame is None:
+        return True
+    return _odometry_at(robot, frame, route.waypoints_xy_m[-1], route, params)
+
+
+def _route_rates(params: RouteCheckParams, hall: bool) -> tuple[float, float]:
+    """How often a route check arrives at once from the route's room and from elsewhere; a
+    check into the hall whose look-alikes have no route beyond it (``hall``) has its own."""
+    if hall:
+        return params.hall_route_hit_rate, params.hall_route_false_rate
+    return params.route_hit_rate, params.route_false_rate
+
+
+def _route_ratio(params: RouteCheckParams, hall: bool = False) -> float:
+    """The likelihood ratio a route that arrived at once gives its room."""
+    hit, false = _route_rates(params, hall)
+    return hit / false
+
+
+def _miss_ratio(params: RouteCheckParams, hall: bool = False) -> float:
+    """The likelihood ratio a route that did not arrive at once gives its room."""
+    hit, false = _route_rates(params, hall)
+    return (1.0 - hit) / (1.0 - false)
+
+
+def _hall_check_alone(
+    localizer: Localizer, room: str, route: Route, params: RouteCheckParams
+) -> bool:
+    """Whether ``route`` out of ``room`` ends in a hall ``room``'s look-alikes open onto too
+    (:func:`shared_rooms`) while none of them has a recorded route (up to ``route_max_m``) on
+    beyond its own hall: the check then stands alone, at the hall's rates
+    (:class:`RouteCheckParams`)."""
+    twins = localizer.lookalikes.get(room, frozenset())
+    doors = localizer.doors
+    if localizer.map.place(route.end).room not in shared_rooms(doors, room, twins):
+        return False
+    graph, places, lookalikes = localizer.map.legs, localizer.map.places, localizer.lookalikes
+    return not any(
+        lookalikes.get(twin)
+        and route_beyond_m(graph, places, twin, lookalikes, doors, params.route_max_m) < math.inf
+        for twin in twins
+    )
+
+
+def _look_at_end(localizer: Localizer, robot: Robot, end: int) -> tuple[bool, float]:
+    """Look where homing to place ``end`` arrived: whether the best-matching place is of
+    ``end``'s room, and the spread inliers with ``end``'s view."""
+    places = localizer.observe(robot.capture().image).evidence.places
+    best = max(places, key=lambda item: item.spread_inliers, default=None)
+    room = localizer.map.place(end).room
+    seen = best is not None and localizer.map.place(best.place_id).room == room
+    inliers = next((item.spread_inliers for item in places if item.place_id == end), 0.0)
+    return seen, inliers
+
+
+def _way_back(
+    localizer: Localizer,
+    robot: Robot,
+    end: int,
+    at_end: HomingResult,
+    into: str,
+    params: RouteCheckParams,
+    step: StepParams,
+) -> tuple[Route, DriveFrame] | None:
+    """A recorded route from place ``end``, where homing ``at_end`` brought the robot, into
+    room ``into``, and the drive frame fixed by ``end``'s stored view; None if the homing did
+    not arrive, ``end`` has no stored pose, no route leads there or the views do not match."""
+    route = route_into(localizer.map.legs, localizer.map.places, end, {into}, params.route_max_m)
+    return _from_known(localizer, robot, end, at_end, route, step)
