@@ -9,10 +9,12 @@ from collections.abc import Sequence
 from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts, partners_of
 from localizer.routes import (
+    LONG_ROUTE_M,
     ROUTE_MAX_M,
     leg_graph,
     rooms_with_routes_beyond,
     rooms_with_routes_out,
+    route_beyond_m,
     shared_rooms,
 )
 from mapdb.records import MapInfo, Place
@@ -91,6 +93,18 @@ def lookalike_lines(
             "recorded drive out to a room without a look-alike: an active localization drives "
             "it out and back and tells them apart"
         )
+    for pair in driven:
+        length_m, room = min(
+            (route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M), room) for room in pair
+        )
+        if length_m > LONG_ROUTE_M:
+            lines.append(
+                f"  look-alike rooms: {_pairs([pair])}; the shortest recorded drive out of them "
+                f"to a room beyond is {length_m:.1f} m (from {room}): over {LONG_ROUTE_M:g} m "
+                "the odometry drifts past doors, and a check often misses from the room itself. "
+                "Record a shorter drive from one of them into a room beyond (toploc map record "
+                "--every-m, --after)"
+            )
     if in_hall:
         rooms = sorted({room for pair in in_hall for room in pair})
         halls = sorted({hall for room in rooms for hall in shared_rooms(doors, room, twins[room])})
