@@ -202,25 +202,6 @@ def shared_rooms(
     return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
-def rooms_with_routes_beyond(
-    places: Sequence[Place],
-    lookalikes: Mapping[str, frozenset[str]],
-    doors: Mapping[str, frozenset[str]],
-    max_length_m: float,
-    graph: nx.Graph | None = None,
-) -> set[str]:
-    """The rooms with look-alikes (``lookalikes``: each room's) that have a place with a
-    recorded route (at most ``max_length_m``) on beyond the hall they share with them
-    (:func:`shared_rooms`; ``doors``: each room's neighbours) to a room without look-alikes;
-    ``graph``: the places' :func:`leg_graph`, if built already."""
-    graph = leg_graph(places) if graph is None else graph
-    return {
-        room
-        for room, twins in lookalikes.items()
-        if twins and route_beyond_m(graph, places, room, lookalikes, doors, max_length_m) < math.inf
-    }
-
-
 def route_beyond_m(
     graph: nx.Graph,
     places: Sequence[Place],

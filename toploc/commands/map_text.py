@@ -4,6 +4,7 @@ in ``map info`` and with ``-v`` (:func:`describe_likelihood`). Pure: text from r
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 from localizer.likelihood import RatioLikelihood
@@ -12,7 +13,6 @@ from localizer.routes import (
     LONG_ROUTE_M,
     ROUTE_MAX_M,
     leg_graph,
-    rooms_with_routes_beyond,
     rooms_with_routes_out,
     route_beyond_m,
     shared_rooms,
@@ -74,7 +74,11 @@ def lookalike_lines(
     paired = {room for pair in model.lookalikes for room in pair}
     doors, twins = partners_of(edges), partners_of(model.lookalikes)
     graph = leg_graph(places)
-    beyond = rooms_with_routes_beyond(places, twins, doors, ROUTE_MAX_M, graph)
+    # the shortest recorded drive from each twin on beyond the hall the pair shares (inf: none)
+    beyond_m = {
+        room: route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M) for room in paired
+    }
+    beyond = {room for room, length_m in beyond_m.items() if length_m < math.inf}
     routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M, paired, graph)
     blind = [pair for pair in without if not set(pair) <= routed]
     # a drive that ends in the hall both twins open onto arrives from the twin too where the
@@ -94,9 +98,7 @@ def lookalike_lines(
             "it out and back and tells them apart"
         )
     for pair in driven:
-        length_m, room = min(
-            (route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M), room) for room in pair
-        )
+        length_m, room = min((beyond_m[room], room) for room in pair)
         if length_m > LONG_ROUTE_M:
             lines.append(
                 f"  look-alike rooms: {_pairs([pair])}; the shortest recorded drive out of them "
