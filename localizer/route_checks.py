@@ -39,6 +39,7 @@ from localizer.routes import (
     route_through,
     shared_rooms,
 )
+from localizer.turn_compass import CompassedRobot
 from localizer.visual_homing import (
     CANCELLED,
     HomingError,
@@ -91,7 +92,9 @@ class RouteCheckParams:
     rates above (docs/results.md, session 25). The way back is checked the same way: homing to
     the place the drive back leads to arrives at once, or the robot may be in any room and the
     belief starts afresh from the next look (two kidnappings of world seed 13 ended sure of a
-    room the robot was not in, after a way back that failed)."""
+    room the robot was not in, after a way back that failed). ``compass_min_turn_deg``: the
+    route drives measure each turn at least this large (degrees) by the camera
+    (:mod:`localizer.turn_compass`); infinity keeps the odometry's turns."""
 
     route_max_m: float = ROUTE_MAX_M
     route_hit_rate: float = 0.8
@@ -101,8 +104,11 @@ class RouteCheckParams:
     route_slack_m: float = 1.0
     route_slack_share: float = 0.3
     route_slack_max_m: float = 2.5
+    compass_min_turn_deg: float = 15.0
 
     def __post_init__(self) -> None:
+        if not self.compass_min_turn_deg > 0:
+            raise ValueError(f"compass_min_turn_deg must be > 0, got {self.compass_min_turn_deg}")
         for name in ("route", "hall_route"):
             hit, false = getattr(self, f"{name}_hit_rate"), getattr(self, f"{name}_false_rate")
             if not 0.0 < false < hit < 1.0:
@@ -288,17 +294,24 @@ def check_route(
     homed_to = start.id if to_start.arrived else None  # where the robot stands at the end
     stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
     view = localizer.map.fingerprint(start.id)
-    frame = _frame_by_view(robot, view, stored, to_start, homing.step)
+    # routes are driven, and drive frames kept, on odometry whose turns the camera measured
+    steered = CompassedRobot(
+        robot,
+        lambda capture: localizer.extract(capture.image),
+        homing.step,
+        math.radians(params.compass_min_turn_deg),
+    )
+    frame = _frame_by_view(steered, view, stored, to_start, homing.step)
     if frame is not None and to_start.arrived:  # a route driven from elsewhere tells nothing
         marks: list[_Mark] = []
 
         def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
-            pose = frame.pose(robot.odometry())
+            pose = frame.pose(steered.odometry())
             marks.append(_Mark(localizer.extract(robot.capture().image), pose))
 
         leg, leg_frame = route, frame
         while True:
-            distance += drive_route(robot, leg, leg_frame, mark).distance_m
+            distance += drive_route(steered, leg, leg_frame, mark).distance_m
             at_end = home(leg.end)
             distance += at_end.distance_m
             frames += len(at_end.lengths)
@@ -309,10 +322,12 @@ def check_route(
             # at once, and the look there names the end room (which has no look-alike): a
             # homing that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the
             # robot was not in arrived at once)
-            confirmed = seen and _at_once(at_end, leg, params, robot, leg_frame)
+            confirmed = seen and _at_once(at_end, leg, params, steered, leg_frame)
             onward = None
             if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
-                onward = _onward(localizer, robot, start.room, leg.end, at_end, params, homing.step)
+                onward = _onward(
+                    localizer, steered, start.room, leg.end, at_end, params, homing.step
+                )
             if onward is None or at_end.reason == CANCELLED:
                 break
             via, (leg, leg_frame) = leg.end, onward
@@ -322,10 +337,10 @@ def check_route(
         # coming back to where the map has the start place, it retraced the recorded route
         known = None
         if confirmed and _end_fixes_the_frame(localizer, start.room, route, via):
-            known = _known_frame(localizer, robot, route.end, at_end, homing.step)
+            known = _known_frame(localizer, steered, route.end, at_end, homing.step)
         way_back = None
         if seen and not confirmed and rival is not None:  # at the end place, known
-            way_back = _way_back(localizer, robot, route.end, at_end, rival, params, homing.step)
+            way_back = _way_back(localizer, steered, route.end, at_end, rival, params, homing.step)
         if at_end.reason == CANCELLED:
             homed_to = route.end if at_end.arrived else None
         elif way_back is not None:
@@ -333,12 +348,12 @@ def check_route(
             # and a recorded route from there leads into the look-alike the check did not
             # refute: if the robot reaches a place of it at once, it is there
             back_route, back_frame = way_back
-            distance += drive_route(robot, back_route, back_frame).distance_m
+            distance += drive_route(steered, back_route, back_frame).distance_m
             back = home(back_route.end)
             distance += back.distance_m
             frames += len(back.lengths)
             homed_to = back_route.end if back.arrived else None
-            if _at_once(back, back_route, params, robot, back_frame):
+            if _at_once(back, back_route, params, steered, back_frame):
                 back_room = localizer.map.place(back_route.end).room
                 localizer.update_rooms({back_room: _route_ratio(params)})
             else:  # somewhere along the way back: the look decides
@@ -347,7 +362,9 @@ def check_route(
         else:
             # back through the views taken on the way out, each homed to (a frame fixed at the
             # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
-            driven_m, homings, held = _back_by_marks(localizer, robot, marks, frame, stored, homing)
+            driven_m, homings, held = _back_by_marks(
+                localizer, steered, marks, frame, stored, homing
+            )
             back = home(start.id)
             distance += driven_m + back.distance_m
             frames += homings + len(back.lengths)
@@ -359,7 +376,7 @@ def check_route(
                 if confirmed not in told:
                     hall = _hall_check_alone(localizer, start.room, route, params)
                     ratio = _route_ratio(params, hall) if confirmed else _miss_ratio(params, hall)
-                    if known is not None and _retraced(known, robot, start, route, params):
+                    if known is not None and _retraced(known, steered, start, route, params):
                         ratio *= _route_ratio(params)  # it is in start's room now, by the map
                     localizer.update_rooms({start.room: ratio})
             elif not (held and back.arrived):  # it may be in any room now: the look decides
@@ -417,7 +434,7 @@ class _Mark:
 
 def _back_by_marks(
     localizer: Localizer,
-    robot: Robot,
+    robot: CompassedRobot,
     marks: Sequence[_Mark],
     frame: DriveFrame,
     start: Pose2D,
@@ -446,7 +463,8 @@ def _back_by_marks(
         distance += drive_route(robot, route_through((here.x_m, here.y_m), (to,)), frame).distance_m
         if mark is None:
             break
-        homed = drive_home(robot, mark.view, localizer.extract, homing)
+        # homing steers by its views: the bare robot, no compass on its turns
+        homed = drive_home(robot.robot, mark.view, localizer.extract, homing)
         distance += homed.distance_m
         frames += len(homed.lengths)
         again = (
