@@ -35,8 +35,9 @@ Sessions 28-30 wrote their changes on world seeds 35, 37, 39 and 43 and judged t
 and 45. Session 31 wrote its changes on seeds 43 and 45 (and, kidnapping into every room,
 35-45) and judged them on seed 47 (record seed 48). Session 32 wrote its changes on seeds
 35-47 and 49 and judged them on seed 51 (record seed 52). Session 33 wrote its changes on
-seeds 37-47 and judged them on seed 53 (record seed 54). World seeds 55 and up have not been
-looked at: the next change must be judged on them.
+seeds 37-47 and judged them on seed 53 (record seed 54). Session 34 wrote its turn compass on
+seeds 39, 43 and 47 and judged it on seed 55 (record seed 56). World seeds 57 and up have not
+been looked at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised

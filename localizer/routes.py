@@ -33,12 +33,6 @@ from mapdb.records import Place
 
 ROUTE_MAX_M = 15.0
 """The longest route the active localizer drives to check a room (metres)."""
-LONG_ROUTE_M = 12.0
-"""A route check longer than this (metres) often misses from its own room: over such a drive
-the odometry drifts past a door (world seed 47's house, two places per room: bathroom_b's
-12.3 m drive into the living room ended against the hall's wall 1.15 m beside the door). Of
-the checks that started in their own room in six runs of the recorded-map benchmark (session
-33), 3 of 8 routes of 12-15 m were confirmed, against 93 of 108 of 3-12 m."""
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,7 @@
 
 from __future__ import annotations
 
-import re
-
-import pytest
-
 from localizer.likelihood import RatioLikelihood
-from localizer.routes import LONG_ROUTE_M
 from mapdb.records import Leg, Place
 from toploc.commands.map_text import lookalike_lines
 
@@ -27,17 +22,14 @@ def drive_to_living(living_x_m: float) -> list[Place]:
     ]
 
 
-def test_twins_whose_only_drive_beyond_is_long_are_asked_for_a_shorter_one():
-    lines = lookalike_lines(TWINS, drive_to_living(15.0), DOORS)  # about 1.5 + 7 + 4 m
-    assert any("each has a recorded drive out" in line for line in lines)
-    [advice] = [line for line in lines if "shortest recorded drive" in line]
-    said = re.search(r"to a room beyond is ([0-9.]+) m \(from twin_b\)", advice)
-    assert "twin_a ~ twin_b" in advice and said and LONG_ROUTE_M < float(said[1]) < 13.0
-    assert f"over {LONG_ROUTE_M:g} m" in advice and "Record a shorter drive" in advice
+def test_twins_with_a_drive_on_beyond_the_hall_are_told_apart_by_it():
+    lines = lookalike_lines(TWINS, drive_to_living(15.0), DOORS)  # 1.5 + 7 + 4 m from twin_b
+    assert any("twin_a ~ twin_b" in line and "recorded drive out" in line for line in lines)
+    assert not any("end only in hall" in line for line in lines)
 
 
-@pytest.mark.parametrize("living_x_m", [10.0, 12.0])  # 8.5 m, 10.5 m
-def test_twins_with_a_short_drive_beyond_get_no_advice_on_its_length(living_x_m):
-    lines = lookalike_lines(TWINS, drive_to_living(living_x_m), DOORS)
-    assert any("each has a recorded drive out" in line for line in lines)
-    assert not any("shortest recorded drive" in line for line in lines)
+def test_a_drive_beyond_longer_than_a_check_drives_asks_for_another():
+    lines = lookalike_lines(TWINS, drive_to_living(18.0), DOORS)  # 15.5 m: over ROUTE_MAX_M
+    assert not any("recorded drive out" in line for line in lines)
+    [advice] = [line for line in lines if "end only in hall" in line]
+    assert "twin_a ~ twin_b" in advice and "Record the drive on" in advice

@@ -10,7 +10,6 @@ from collections.abc import Sequence
 from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts, partners_of
 from localizer.routes import (
-    LONG_ROUTE_M,
     ROUTE_MAX_M,
     leg_graph,
     rooms_with_routes_out,
@@ -74,11 +73,12 @@ def lookalike_lines(
     paired = {room for pair in model.lookalikes for room in pair}
     doors, twins = partners_of(edges), partners_of(model.lookalikes)
     graph = leg_graph(places)
-    # the shortest recorded drive from each twin on beyond the hall the pair shares (inf: none)
-    beyond_m = {
-        room: route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M) for room in paired
+    # the twins with a recorded drive (up to ROUTE_MAX_M) on beyond the hall the pair shares
+    beyond = {
+        room
+        for room in paired
+        if route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M) < math.inf
     }
-    beyond = {room for room, length_m in beyond_m.items() if length_m < math.inf}
     routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M, paired, graph)
     blind = [pair for pair in without if not set(pair) <= routed]
     # a drive that ends in the hall both twins open onto arrives from the twin too where the
@@ -97,16 +97,6 @@ def lookalike_lines(
             "recorded drive out to a room without a look-alike: an active localization drives "
             "it out and back and tells them apart"
         )
-    for pair in driven:
-        length_m, room = min((beyond_m[room], room) for room in pair)
-        if length_m > LONG_ROUTE_M:
-            lines.append(
-                f"  look-alike rooms: {_pairs([pair])}; the shortest recorded drive out of them "
-                f"to a room beyond is {length_m:.1f} m (from {room}): over {LONG_ROUTE_M:g} m "
-                "the odometry drifts past doors, and a check often misses from the room itself. "
-                "Record a shorter drive from one of them into a room beyond (toploc map record "
-                "--every-m, --after)"
-            )
     if in_hall:
         rooms = sorted({room for pair in in_hall for room in pair})
         halls = sorted({hall for room in rooms for hall in shared_rooms(doors, room, twins[room])})
