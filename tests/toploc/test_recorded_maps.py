@@ -15,6 +15,7 @@ from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState, StateThresholds, top_two_ratio
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult
+from localizer.route_checks import RouteCheckParams
 from localizer.visual_homing import HomingResult, drive_home
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
@@ -399,6 +400,39 @@ def test_twins_are_checked_first_by_a_route_that_ends_beyond_the_hall_they_share
     first = result.checks[0]
     assert loaded.place(first.end).room == "kitchen"
     assert first.confirmed is (first.room == "office_a")
+
+
+class SlippingRobot(RobotWrapper):
+    """The simulated robot, whose turns all go ``slip`` of the turn too far; its odometry has
+    the turn it was told."""
+
+    def __init__(self, robot: SimulatedRobot, slip: float) -> None:
+        super().__init__(robot)
+        self.sim, self.slip = robot, slip
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        turned = self.sim.move(turn_rad, 0.0)
+        pose = self.sim.true_pose
+        self.sim.carry(replace(pose, heading_rad=pose.heading_rad + self.slip * turn_rad))
+        moved = self.sim.move(0.0, forward_m)
+        return MoveResult(turned.turned_rad, moved.moved_m, moved.bumped)
+
+
+@pytest.mark.parametrize(("compass_deg", "arrives"), [(15.0, True), (math.inf, False)])
+def test_a_check_driven_on_turns_that_slip_arrives_when_the_camera_measures_them(
+    driven_to_kitchen, compass_deg, arrives
+):
+    """A robot in office_b checks office_b by its route into the kitchen; its base turns 20 %
+    too far every time. Steered on the turns it was told, the route ends off the kitchen's
+    place; with each turn measured by the views before and after it, the route ends there."""
+    sim = SimulatedRobot.kidnapped(make_world("building"), "office_b", seed=4, camera=CAMERA)
+    params = ActiveParams(routes=RouteCheckParams(compass_min_turn_deg=compass_deg))
+    result = localize_actively(
+        Localizer(load_map(driven_to_kitchen)), SlippingRobot(sim, 0.2), params=params
+    )
+    first = result.checks[0]
+    assert first.room == "office_b" and first.started
+    assert first.confirmed is arrives
 
 
 def odds(belief, room: str, other: str) -> float:
