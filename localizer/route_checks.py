@@ -281,8 +281,9 @@ def check_route(
     arrive drives no route: the robot homes back to the place it stood at, if it stood at one.
     A route that ends in a room ``start``'s room opens onto, reached at once, goes on from its
     end place to a room beyond (:func:`_onward`), and the check is of the two legs together.
-    Returns the check, the frames captured, the homing to the route's end place and the place
-    the robot homed to last (None: it stands where no homing arrived), to look from."""
+    Returns the check, the frames captured (the turn compass's too), the homing to the route's
+    end place and the place the robot homed to last (None: it stands where no homing
+    arrived), to look from."""
     assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
     distance, frames = 0.0, 0
     stood_at = localizer.latest.at_place if localizer.latest is not None else None
@@ -391,6 +392,7 @@ def check_route(
         distance += back.distance_m
         frames += len(back.lengths)
         homed_to = stood_at if back.arrived else None
+    frames += steered.views  # the views that measured the route drives' turns
     started = at_end is not to_start  # the route was driven
     end_homing_m = at_end.distance_m if started else 0.0
     check = RouteCheck(

@@ -53,6 +53,8 @@ class CompassedRobot:
         self._frame = DriveFrame(now, now)
         self.corrections_rad: list[float] = []
         """The corrections made so far (measured minus odometric turn, radians)."""
+        self.views = 0
+        """The views the compass captured so far."""
 
     def capture(self) -> Capture:
         return self.robot.capture()
@@ -70,7 +72,7 @@ class CompassedRobot:
         missed is turned with the drive, so that the drive goes the way it was told."""
         if not abs(turn_rad) >= self.min_turn_rad:
             return self.robot.move(turn_rad, forward_m)
-        before_view, before = self.look(self.robot.capture()), self.robot.odometry()
+        before_view, before = self._view(), self.robot.odometry()
         turned = self.robot.move(turn_rad, 0.0)
         error_rad = self._turn_error_rad(before_view, before, self.robot.odometry())
         if forward_m == 0.0:
@@ -97,7 +99,11 @@ class CompassedRobot:
         """The turn (radians, counter-clockwise) from ``before``'s view to a view taken now,
         by their matched features; None if they do not match."""
         try:
-            _, shift_rad = matched_inliers(self.look(self.robot.capture()), before, self.step)
+            _, shift_rad = matched_inliers(self._view(), before, self.step)
         except HomingError:
             return None
         return -shift_rad  # a feature at bearing b is seen at b + shift after turning -shift
+
+    def _view(self) -> Fingerprint:
+        self.views += 1
+        return self.look(self.robot.capture())

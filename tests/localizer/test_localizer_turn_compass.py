@@ -74,13 +74,14 @@ def test_a_turn_that_slipped_is_measured_by_the_views_before_and_after(
     robot = CompassedRobot(bare, look, StepParams(), math.radians(15.0))
     robot.move(math.radians(turn_deg if left else -turn_deg), 0.0)
     assert abs(heading_error_deg(robot, bare)) < 1.5  # a 512-column panorama: 0.7° per column
+    assert robot.views == 2  # before and after
 
 
 def test_a_small_turn_keeps_the_odometrys_turn(textured: np.ndarray) -> None:
     bare = SlippingRobot(textured, 1.1)
     robot = CompassedRobot(bare, look, StepParams(), math.radians(15.0))
     robot.move(math.radians(10.0), 0.5)
-    assert robot.corrections_rad == []
+    assert robot.corrections_rad == [] and robot.views == 0
     assert robot.odometry() == bare.odometry()
 
 
