@@ -145,10 +145,6 @@ def graph(zbus: Bus) -> Iterator[Graph]:
 
 
 def test_the_graph_shows_the_node_its_publishers_and_services_with_types_and_hashes(graph):
-    tokens = graph.tokens()
-    zid = str(graph.ros_session.info.zid())
-    assert f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%/toploc" in tokens
-    by_name = {t.split("/")[9]: t.split("/") for t in tokens if t.split("/")[5] != "NN"}
     expected = {
         "%toploc%belief_json": ("MP", "std_msgs::msg::dds_::String_", STRING_HASH),
         "%diagnostics": ("MP", "diagnostic_msgs::msg::dds_::DiagnosticArray_", None),
@@ -160,6 +156,16 @@ def test_the_graph_shows_the_node_its_publishers_and_services_with_types_and_has
             "SS", "std_srvs::srv::dds_::Empty_", EMPTY_HASH,
         ),
     }  # fmt: skip
+    tokens: list[str] = []
+
+    def every_endpoint_shows() -> bool:  # one liveliness query may end before the router has all
+        tokens[:] = graph.tokens()
+        return {t.split("/")[9] for t in tokens if t.split("/")[5] != "NN"} >= set(expected)
+
+    wait_for(every_endpoint_shows, 10)
+    zid = str(graph.ros_session.info.zid())
+    assert f"@ros2_lv/{DOMAIN}/{zid}/0/0/NN/%/%/toploc" in tokens
+    by_name = {t.split("/")[9]: t.split("/") for t in tokens if t.split("/")[5] != "NN"}
     assert set(by_name) == set(expected)
     for name, (kind, dds_type, type_hash) in expected.items():
         parts = by_name[name]
