@@ -309,6 +309,7 @@ def check_route(
         def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
             pose = frame.pose(steered.odometry())
             marks.append(_Mark(localizer.extract(robot.capture().image), pose))
+            steered.seen(marks[-1].view)  # the turn toward the next waypoint starts here
 
         leg, leg_frame = route, frame
         while True:
@@ -476,6 +477,8 @@ def _back_by_marks(
         )
         frame = again or frame
         reached.append(homed.arrived)
+        if homed.arrived:  # it stands where it took its last view
+            robot.seen(homed.last)
     held = not reached or (reached[-1] and 2 * sum(reached) > len(reached))
     return distance, frames, held
 

@@ -55,6 +55,7 @@ class CompassedRobot:
         """The corrections made so far (measured minus odometric turn, radians)."""
         self.views = 0
         """The views the compass captured so far."""
+        self._seen: tuple[Fingerprint, Pose2D] | None = None
 
     def capture(self) -> Capture:
         return self.robot.capture()
@@ -66,13 +67,21 @@ class CompassedRobot:
         """The robot's odometry with the measured turns (the frame it had when wrapped)."""
         return self._frame.pose(self.robot.odometry())
 
+    def seen(self, view: Fingerprint) -> None:
+        """``view``: the robot's view from where it stands now (a caller took it); the next
+        measured turn starts from it if the robot has not moved since, instead of taking one."""
+        self._seen = (view, self.robot.odometry())
+
     def move(self, turn_rad: float, forward_m: float) -> MoveResult:
         """Turn by ``turn_rad`` and drive ``forward_m`` (as :meth:`Robot.move`); a turn of at
         least ``min_turn_rad`` is measured by the views before and after it, and what it
         missed is turned with the drive, so that the drive goes the way it was told."""
         if not abs(turn_rad) >= self.min_turn_rad:
+            self._seen = None
             return self.robot.move(turn_rad, forward_m)
-        before_view, before = self._view(), self.robot.odometry()
+        before = self.robot.odometry()
+        seen, self._seen = self._seen, None
+        before_view = seen[0] if seen is not None and seen[1] == before else self._view()
         turned = self.robot.move(turn_rad, 0.0)
         error_rad = self._turn_error_rad(before_view, before, self.robot.odometry())
         if forward_m == 0.0:

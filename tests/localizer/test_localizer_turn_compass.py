@@ -133,3 +133,23 @@ def test_a_route_driven_with_the_compass_ends_where_it_should_despite_slipping_t
         ends[compass_deg].append(math.dist((bare.true_pose.x_m, bare.true_pose.y_m), end))
     assert max(ends[15.0]) < 0.2
     assert np.mean(ends[math.inf]) > 3 * np.mean(ends[15.0])
+
+
+def test_a_view_taken_where_the_robot_stands_starts_the_next_measured_turn(
+    textured: np.ndarray,
+) -> None:
+    bare = SlippingRobot(textured, 1.1)
+    robot = CompassedRobot(bare, look, StepParams(), math.radians(15.0))
+    robot.seen(look(bare.capture()))  # a mark, say
+    robot.move(math.radians(90.0), 0.0)
+    assert robot.views == 1  # only the view after the turn
+    assert abs(heading_error_deg(robot, bare)) < 1.5
+
+
+def test_a_view_taken_before_the_robot_moved_is_not_used(textured: np.ndarray) -> None:
+    bare = SlippingRobot(textured, 1.1)
+    robot = CompassedRobot(bare, look, StepParams(), math.radians(15.0))
+    robot.seen(look(bare.capture()))
+    robot.move(0.0, 0.5)  # it moved since: the view is not from here
+    robot.move(math.radians(90.0), 0.0)
+    assert robot.views == 2
