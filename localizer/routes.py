@@ -196,6 +196,32 @@ def shared_rooms(
     return {r for r in doors.get(room, ()) if any(r in doors.get(t, ()) for t in twins)}
 
 
+def route_beyond(
+    graph: nx.Graph,
+    places: Sequence[Place],
+    room: str,
+    lookalikes: Mapping[str, frozenset[str]],
+    doors: Mapping[str, frozenset[str]],
+    max_length_m: float,
+) -> Route | None:
+    """The shortest recorded route (at most ``max_length_m``) from a place of ``room`` on
+    beyond the hall it shares with its look-alikes (``lookalikes``: each room's;
+    :func:`shared_rooms`, ``doors``: each room's neighbours) to a room without look-alikes;
+    None if there is none. ``graph``: the places' :func:`leg_graph`."""
+    leave = {name for name, twins in lookalikes.items() if twins}
+    leave |= {room, *shared_rooms(doors, room, lookalikes.get(room, frozenset()))}
+    routes = (
+        route_out(graph, places, place.id, leave, max_length_m)
+        for place in places
+        if place.room == room
+    )
+    return min(
+        (route for route in routes if route is not None),
+        key=lambda route: (route.length_m, route.start),
+        default=None,
+    )
+
+
 def route_beyond_m(
     graph: nx.Graph,
     places: Sequence[Place],
@@ -204,18 +230,9 @@ def route_beyond_m(
     doors: Mapping[str, frozenset[str]],
     max_length_m: float,
 ) -> float:
-    """The length (metres) of the shortest recorded route (at most ``max_length_m``) from a
-    place of ``room`` on beyond the hall it shares with its look-alikes (``lookalikes``: each
-    room's; :func:`shared_rooms`, ``doors``: each room's neighbours) to a room without
-    look-alikes; inf if there is none. ``graph``: the places' :func:`leg_graph`."""
-    leave = {name for name, twins in lookalikes.items() if twins}
-    leave |= {room, *shared_rooms(doors, room, lookalikes.get(room, frozenset()))}
-    routes = (
-        route_out(graph, places, place.id, leave, max_length_m)
-        for place in places
-        if place.room == room
-    )
-    return min((route.length_m for route in routes if route is not None), default=math.inf)
+    """The length (metres) of :func:`route_beyond`; inf if there is none."""
+    route = route_beyond(graph, places, room, lookalikes, doors, max_length_m)
+    return math.inf if route is None else route.length_m
 
 
 def rooms_with_routes_out(

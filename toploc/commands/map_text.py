@@ -4,16 +4,17 @@ in ``map info`` and with ``-v`` (:func:`describe_likelihood`). Pure: text from r
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
+from collections import Counter
+from collections.abc import Mapping, Sequence
 
 from localizer.likelihood import RatioLikelihood
 from localizer.lookalikes import pairs_without_counterparts, partners_of
 from localizer.routes import (
     ROUTE_MAX_M,
+    Route,
     leg_graph,
     rooms_with_routes_out,
-    route_beyond_m,
+    route_beyond,
     shared_rooms,
 )
 from mapdb.records import MapInfo, Place
@@ -73,18 +74,21 @@ def lookalike_lines(
     paired = {room for pair in model.lookalikes for room in pair}
     doors, twins = partners_of(edges), partners_of(model.lookalikes)
     graph = leg_graph(places)
-    # the twins with a recorded drive (up to ROUTE_MAX_M) on beyond the hall the pair shares
-    beyond = {
-        room
-        for room in paired
-        if route_beyond_m(graph, places, room, twins, doors, ROUTE_MAX_M) < math.inf
-    }
+    # each twin's shortest recorded drive (up to ROUTE_MAX_M) on beyond the hall the pair shares
+    drives = {room: route_beyond(graph, places, room, twins, doors, ROUTE_MAX_M) for room in paired}
+    beyond = {room for room, drive in drives.items() if drive is not None}
     routed = rooms_with_routes_out(places, paired, ROUTE_MAX_M, paired, graph)
     blind = [pair for pair in without if not set(pair) <= routed]
     # a drive that ends in the hall both twins open onto arrives from the twin too where the
     # hall looks alike at both doors; a twin's drive on beyond it tells for the pair
     in_hall = [pair for pair in without if set(pair) <= routed and not set(pair) & beyond]
     driven = [pair for pair in without if set(pair) <= routed and set(pair) & beyond]
+    # a room the map knows from one view may have a look-alike it cannot see (a copy of the
+    # twins' wing): a drive that ends there may end alike in that look-alike from the twin
+    counts = Counter(room_of.values())
+    ends = {pair: _drive_ends(pair, drives, room_of) for pair in driven}
+    unsure = [pair for pair in driven if all(counts[room] == 1 for room in ends[pair])]
+    driven = [pair for pair in driven if pair not in unsure]
     lines = []
     if told:
         lines.append(
@@ -96,6 +100,15 @@ def lookalike_lines(
             f"  look-alike rooms: {_pairs(driven)}; no frame tells them apart, but each has a "
             "recorded drive out to a room without a look-alike: an active localization drives "
             "it out and back and tells them apart"
+        )
+    for pair in unsure:
+        names = ", ".join(sorted(ends[pair]))
+        lines.append(
+            f"  look-alike rooms: {_pairs([pair])}; no frame tells them apart, and their "
+            f"recorded drives beyond end in {names}, known from one place: a room of one place "
+            "may have a look-alike the map cannot see, where the drive from the twin ends "
+            f"alike. Record a second place in {names} (toploc map record), or the drive on "
+            "into a room of several places"
         )
     if in_hall:
         rooms = sorted({room for pair in in_hall for room in pair})
@@ -156,3 +169,10 @@ def format_info(info: MapInfo, places: Sequence[Place] = ()) -> str:
     if not info.likelihoods:
         lines[-1] += " not calibrated (toploc map calibrate)"
     return "\n".join(lines + lookalikes)
+
+
+def _drive_ends(
+    pair: tuple[str, str], drives: Mapping[str, Route | None], room_of: Mapping[int, str]
+) -> set[str]:
+    """The rooms the twins' drives beyond (``drives``, by room) end in."""
+    return {room_of[drive.end] for room in pair if (drive := drives[room]) is not None}
