@@ -266,11 +266,50 @@ def classify(
 
 
 @dataclass(frozen=True)
+class PartlySeen:
+    """Why a belief sure enough by its odds says ``ambiguous``: the latest frame saw its most
+    likely ``room`` on ``horizon_share`` of the horizon (0 to 1), less than the
+    ``needed_share`` (:attr:`StateThresholds.min_coverage`). The robot may stand at that
+    room's door, or in a room the map lacks and see it through the door; homing to one of
+    its places and looking there tells."""
+
+    room: str
+    horizon_share: float
+    needed_share: float
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"room", "horizon_share", "needed_share"}``."""
+        return {
+            "room": self.room,
+            "horizon_share": self.horizon_share,
+            "needed_share": self.needed_share,
+        }
+
+    @classmethod
+    def from_json(cls, data: Any) -> PartlySeen:
+        """Inverse of :meth:`to_json`; ``ValueError`` naming what is wrong."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"partly_seen must be an object, got {data!r}")
+        shares = []
+        for name in ("horizon_share", "needed_share"):
+            share = _json_number(data.get(name), f"partly_seen.{name}")
+            if not 0.0 <= share <= 1.0:
+                raise ValueError(f"partly_seen.{name} must be in [0, 1], got {share!r}")
+            shares.append(share)
+        room = data.get("room")
+        if not isinstance(room, str):
+            raise ValueError(f"partly_seen.room must be a room name, got {room!r}")
+        return cls(room, shares[0], shares[1])
+
+
+@dataclass(frozen=True)
 class RoomBelief:
     """A snapshot of the belief, for the bus, the command line and the policies.
 
     ``best_place_id`` / ``best_place_room`` / ``best_place_inliers``: the best-matching place of
     the latest frame, if the caller knows it. ``stamp_s``: seconds (caller's clock), optional.
+    ``partly_seen``: set when the belief is ``ambiguous`` only because its most likely room was
+    seen on too little of the horizon (:class:`PartlySeen`).
     :meth:`to_json` / :meth:`from_json` are the one JSON form of a belief (docs/bus.md).
     """
 
@@ -282,6 +321,7 @@ class RoomBelief:
     best_place_inliers: int | None = None
     stamp_s: float | None = None
     best_place_room: str | None = None
+    partly_seen: PartlySeen | None = None
 
     def __post_init__(self) -> None:
         if len(self.rooms) != len(self.probabilities) or not self.rooms:
@@ -345,7 +385,8 @@ class RoomBelief:
     def to_json(self) -> dict[str, Any]:
         """The belief message: ``{"schema", "kind": "belief", "rooms": {name: p}, "state",
         "entropy_bits", "top", "second", "top_two_ratio", "best_place": {"place_id", "room",
-        "inliers"} | null, "stamp"}`` (ratio ``null`` when infinite; ``stamp`` in seconds)."""
+        "inliers"} | null, "stamp"}`` (ratio ``null`` when infinite; ``stamp`` in seconds), and
+        ``"partly_seen"`` (:meth:`PartlySeen.to_json`) when it is set."""
         ratio = top_two_ratio(np.asarray(self.probabilities))
         second = self.second
         best_place = None
@@ -355,7 +396,7 @@ class RoomBelief:
                 "room": self.best_place_room,
                 "inliers": self.best_place_inliers,
             }
-        return {
+        message = {
             "schema": BELIEF_SCHEMA,
             "kind": BELIEF_KIND,
             "rooms": self.as_dict(),
@@ -367,6 +408,9 @@ class RoomBelief:
             "best_place": best_place,
             "stamp": self.stamp_s,
         }
+        if self.partly_seen is not None:
+            message["partly_seen"] = self.partly_seen.to_json()
+        return message
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RoomBelief:
@@ -384,6 +428,7 @@ class RoomBelief:
         entropy = _json_number(_field(data, "entropy_bits"), "entropy_bits")
         best = _field(data, "best_place")
         stamp = data.get("stamp")
+        partly_seen = data.get("partly_seen")
         if best is not None and not isinstance(best, Mapping):
             raise ValueError(f"best_place must be an object or null, got {best!r}")
         return cls(
@@ -395,6 +440,7 @@ class RoomBelief:
             best_place_inliers=None if best is None else _json_int(best, "inliers"),
             stamp_s=None if stamp is None else _json_number(stamp, "stamp"),
             best_place_room=None if best is None else _json_room(best.get("room")),
+            partly_seen=None if partly_seen is None else PartlySeen.from_json(partly_seen),
         )
 
 

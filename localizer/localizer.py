@@ -20,7 +20,13 @@ import cv2
 import networkx as nx
 import numpy as np
 
-from localizer.belief import BeliefFilter, LocalizationState, RoomBelief, StateThresholds
+from localizer.belief import (
+    BeliefFilter,
+    LocalizationState,
+    PartlySeen,
+    RoomBelief,
+    StateThresholds,
+)
 from localizer.cameras import CameraSpec
 from localizer.evidence import (
     EvidenceParams,
@@ -545,7 +551,9 @@ class Localizer:
         """The current belief; ``state`` overrides the computed one (the service's homing)."""
         belief = self._belief_by_odds()
         if state is None and self._held_back(belief):
-            state = LocalizationState.AMBIGUOUS
+            room = belief.top[0]
+            seen = PartlySeen(room, self._seen_share(room), self.config.thresholds.min_coverage)
+            return replace(belief, state=LocalizationState.AMBIGUOUS, partly_seen=seen)
         return belief if state is None else belief.with_state(state)
 
     def _belief_by_odds(self) -> RoomBelief:
@@ -584,10 +592,14 @@ class Localizer:
         a room of two places be said from its door (the first looks of world seeds 35-45's
         recorded maps, two places per room: 14 sure and wrong, 3 with the union of the
         places; docs/results.md)."""
+        return self._seen_share(room) >= self.config.thresholds.min_coverage
+
+    def _seen_share(self, room: str) -> float:
+        """The share of the horizon (0 to 1) the latest frame's inliers with ``room``'s
+        places cover (:attr:`Observation.room_coverages`); 1 before any frame."""
         if self.latest is None:
-            return True
-        coverage = self.latest.room_coverages.get(room, 0.0)
-        return coverage >= self.config.thresholds.min_coverage
+            return 1.0
+        return self.latest.room_coverages.get(room, 0.0)
 
     def _thresholds(self, probabilities: np.ndarray) -> StateThresholds:
         """The configured thresholds with the likelihood's lost test, and the stricter

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -14,6 +14,7 @@ from softmax_likelihood import SoftmaxLikelihood
 from localizer.belief import (
     BeliefFilter,
     LocalizationState,
+    PartlySeen,
     RoomBelief,
     StateThresholds,
     classify,
@@ -318,9 +319,24 @@ def test_room_belief_json_round_trip():
         RoomBelief.from_json({k: v for k, v in data.items() if k != "state"})
 
 
+def test_a_belief_that_waits_for_a_room_seen_in_part_says_so_in_its_message():
+    plain = RoomBelief.from_probabilities(("a", "b"), np.array([0.95, 0.05]))
+    assert "partly_seen" not in plain.to_json()  # readers that do not know it see nothing new
+    waiting = replace(plain, partly_seen=PartlySeen("a", 0.44, 0.6))
+    data = waiting.to_json()
+    assert data["partly_seen"] == {"room": "a", "horizon_share": 0.44, "needed_share": 0.6}
+    assert RoomBelief.from_json(data) == waiting
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [
+        (
+            {"partly_seen": {"room": "a", "horizon_share": 1.5, "needed_share": 0.6}},
+            r"partly_seen.horizon_share must be in \[0, 1\]",
+        ),
+        ({"partly_seen": {"horizon_share": 0.4, "needed_share": 0.6}}, "partly_seen.room"),
+        ({"partly_seen": 0.4}, "partly_seen must be an object"),
         ({"rooms": {}}, "rooms must be a non-empty object"),
         ({"rooms": {"a": 1.5}}, r"rooms\['a'\] must be a probability"),
         ({"state": "confused"}, "state must be one of"),

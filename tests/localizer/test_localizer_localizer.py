@@ -185,6 +185,18 @@ def test_a_room_seen_on_part_of_the_horizon_is_not_localized(arc_deg, state):
     assert localizer.belief().state is LocalizationState(state)
 
 
+def test_a_belief_that_waits_for_a_room_seen_in_part_says_on_how_much_of_the_horizon():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"attic": 100.0, "cellar": 1.0})
+    localizer.latest = frame_seeing(localizer, {1: (0.0, 130.0)})
+    seen = localizer.belief().partly_seen
+    assert seen is not None and seen.room == "attic"
+    assert seen.horizon_share == pytest.approx(localizer.latest.room_coverages["attic"])
+    assert seen.horizon_share < seen.needed_share == localizer.config.thresholds.min_coverage
+    localizer.latest = frame_seeing(localizer, {1: (0.0, 340.0)})
+    assert localizer.belief().partly_seen is None  # localized: it waits for nothing
+
+
 def test_a_room_of_two_places_seen_through_its_door_from_both_is_not_localized():
     localizer = Localizer(one_and_two_place_map())
     localizer.reset({"cellar": 100.0, "attic": 1.0})

@@ -59,6 +59,15 @@ def test_an_active_reply_says_how_many_drives_and_why_it_ended():
     assert format_belief(settled).splitlines()[3] == "active: 2 drives, 1.89 m; settled"
 
 
+def test_a_belief_sure_by_its_odds_that_waits_says_why():
+    waiting = belief("ambiguous", {"circus_arena": 1.0, "vestibule": 0.0})
+    waiting["partly_seen"] = {"room": "circus_arena", "horizon_share": 0.44, "needed_share": 0.6}
+    line = format_belief(waiting).splitlines()[3]
+    assert line.startswith("waits: circus_arena seen on 44% of the horizon, 60% needed")
+    homing = {**waiting, "state": "homing"}  # driving to look: the line would be stale
+    assert not any(text.startswith("waits:") for text in format_belief(homing).splitlines())
+
+
 def test_twins_with_no_telling_place_get_a_hint_of_what_to_record():
     twins = belief("ambiguous", {"office_a": 0.5, "office_b": 0.5, "kitchen": 0.0})
     twins["active"] = {"drives": 0, "distance_m": 0.0, "ended": "no-telling-place"}

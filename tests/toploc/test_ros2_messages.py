@@ -52,6 +52,13 @@ def test_the_diagnostic_level_follows_the_state(types, state, level):
     assert float(values["entropy_bits"]) == pytest.approx(belief["entropy_bits"])
 
 
+def test_a_belief_that_waits_for_a_room_seen_in_part_says_so_in_its_diagnostics(types):
+    belief = make_belief({"kitchen": 0.99, "hall": 0.01}, "ambiguous")
+    belief["partly_seen"] = {"room": "kitchen", "horizon_share": 0.44, "needed_share": 0.6}
+    status = round_trip(types, belief_diagnostics(types, belief, "r1"), DIAGNOSTIC_ARRAY).status[0]
+    assert {kv.key: kv.value for kv in status.values}["partly_seen"] == "kitchen 0.440 0.600"
+
+
 def test_a_stale_belief_is_stale_everywhere(types):
     belief = mark_stale(make_belief({"kitchen": 0.9, "hall": 0.1}, "localized"), now_s=5.0)
     status = belief_diagnostics(types, belief, "r1").status[0]

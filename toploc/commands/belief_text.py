@@ -61,6 +61,19 @@ NO_TELLING_PLACE_HINT = (
 )
 
 
+def partly_seen_line(belief: Mapping[str, Any]) -> str | None:
+    """Why a belief sure by its odds waits (its ``partly_seen``): ``waits: circus_arena seen on
+    44% of the horizon, 60% needed (...)``; None when it does not (or is not ambiguous)."""
+    seen = belief.get("partly_seen")
+    if seen is None or belief["state"] != "ambiguous":
+        return None
+    return (
+        f"waits: {seen['room']} seen on {seen['horizon_share']:.0%} of the horizon, "
+        f"{seen['needed_share']:.0%} needed (at its door, or in a room the map lacks? "
+        "a look from one of its places tells)"
+    )
+
+
 def active_line(belief: Mapping[str, Any]) -> str | None:
     """The line an active localization's reply adds: ``active: 2 drives, 1.89 m; settled``;
     None for a belief without ``active``. An ending this version does not know is shown as
@@ -83,7 +96,8 @@ def active_line(belief: Mapping[str, Any]) -> str | None:
 
 
 def format_belief(belief: Mapping[str, Any], top: int | None = None) -> str:
-    """Several lines: :func:`state_line`, entropy and stamp, the best place, how an active
+    """Several lines: :func:`state_line`, entropy and stamp, the best place, why a sure belief
+    waits (:func:`partly_seen_line`), how an active
     localization went (:func:`active_line`, with a hint when no place tells the top rooms
     apart), then the rooms by probability with a bar each (the ``top`` first; all if None). A
     lost belief lists no rooms: it is not an answer."""
@@ -98,6 +112,9 @@ def format_belief(belief: Mapping[str, Any], top: int | None = None) -> str:
         f"entropy {belief['entropy_bits']:.3f} bits   stamp {belief['stamp']:.3f} s",
         f"best place: {best_text}",
     ]
+    waits = partly_seen_line(belief)
+    if waits is not None:
+        lines.append(waits)
     active = active_line(belief)
     if active is not None:
         lines.append(active)

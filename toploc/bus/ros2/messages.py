@@ -66,7 +66,8 @@ def summary(belief: Mapping[str, Any]) -> str:
 def belief_diagnostics(types: Ros2Types, belief: Mapping[str, Any], hardware_id: str) -> Any:
     """A ``diagnostic_msgs/msg/DiagnosticArray`` of one status: level OK (localized), WARN
     (ambiguous, homing), ERROR (lost) or STALE; the summary as its message; the state, top
-    room, probability, entropy and stale flag as its values."""
+    room, probability, entropy and stale flag as its values, and ``partly_seen`` (``room
+    share needed``: why a belief sure by its odds waits) when the belief has it."""
     top = belief.get("top") or {}
     values = {
         "state": str(belief["state"]),
@@ -75,6 +76,11 @@ def belief_diagnostics(types: Ros2Types, belief: Mapping[str, Any], hardware_id:
         "entropy_bits": f"{belief['entropy_bits']:.6f}",
         "stale": "true" if belief.get("stale") else "false",
     }
+    seen = belief.get("partly_seen")
+    if seen is not None:
+        values["partly_seen"] = (
+            f"{seen['room']} {seen['horizon_share']:.3f} {seen['needed_share']:.3f}"
+        )
     level = STALE if belief.get("stale") else LEVEL_OF_STATE.get(str(belief["state"]), ERROR)
     status = types.message(
         "diagnostic_msgs/msg/DiagnosticStatus",
