@@ -18,6 +18,8 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
@@ -52,16 +54,18 @@ class ActiveParams:
     """``max_targets``: drives that tell something the robot may make before it gives up
     (drives that told nothing count once there were as many: :func:`_drives_spent`);
     ``homing``: the visual homing loop's settings. ``lost_looks``: while the belief is
-    ``lost``, the robot turns by ``lost_turn_deg``, drives ``lost_step_m`` and looks again, at
-    most this many times (a robot woken facing a bare wall or a doorway sees little; a step
-    away it may see its room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a
-    move, issue 19).
+    ``lost``, the robot steps ``lost_step_m`` away and looks again, at most this many times
+    (a robot woken facing a bare wall or a doorway sees little; a step away it may see its
+    room; 12 of 48 kidnappings on recorded maps ended ``lost`` without a move, issue 19).
     A look that matched a place with at least ``lost_home_min_inliers`` verified inliers, too
     few to tell a room, homes to that place first (each such place once): a robot woken far
     from its room's few stored places sees them faintly, and near one it sees its room (on
     world seed 24's house, two places per room, 4 of 5 kidnappings into one bedroom ended
-    ``lost`` after two steps away, and none when homing there); where the homing drives
-    nowhere, the robot steps away as above.
+    ``lost`` after two steps away, and none when homing there). Where that homing ends less
+    than ``lost_stuck_m`` from where it began (odometry), or no place was matched, the robot
+    steps towards the features the look verified with any place (:func:`matched_bearing_rad`:
+    in a room's corner they lie across the room), or turns by ``lost_turn_deg`` first when
+    too few were verified to say where; a step that bumps at once is driven the other way.
     ``min_new_view_m``: a drive shorter than this (odometric) ends where the robot already
     looked, and its frame is not folded into the belief again: the same view twice is one
     piece of evidence, not two (homing to a counterpart at the spot the robot stands on
@@ -70,10 +74,11 @@ class ActiveParams:
 
     max_targets: int = 4
     homing: HomingParams = field(default_factory=HomingParams)
-    lost_looks: int = 2
+    lost_looks: int = 3
     lost_turn_deg: float = 120.0
     lost_step_m: float = 0.5
     lost_home_min_inliers: int = 4
+    lost_stuck_m: float = 0.3
     min_new_view_m: float = 0.1
     routes: RouteCheckParams = field(default_factory=RouteCheckParams)
 
@@ -85,6 +90,8 @@ class ActiveParams:
             )
         if not (math.isfinite(self.lost_turn_deg) and math.isfinite(self.lost_step_m)):
             raise ValueError("lost_turn_deg and lost_step_m must be finite")
+        if not self.lost_stuck_m >= 0.0:
+            raise ValueError(f"lost_stuck_m must be >= 0, got {self.lost_stuck_m!r}")
         if not self.min_new_view_m >= 0.0:
             raise ValueError(f"min_new_view_m must be >= 0, got {self.min_new_view_m!r}")
 
@@ -189,7 +196,7 @@ def localize_actively(
         if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
             looks_elsewhere += 1
             faint = _faintly_seen(observation, params.lost_home_min_inliers, homed_lost)
-            at_place, homed_m = None, 0.0
+            began, at_place = robot.odometry(), None
             if faint is not None:  # the place it matched best, though too weakly to tell
                 homed_lost.add(faint)
                 homing = go(faint)
@@ -198,10 +205,17 @@ def localize_actively(
                 if homing.reason == CANCELLED:
                     ended = CANCELLED
                     break
-                at_place, homed_m = faint, homing.distance_m
-            if homed_m < params.min_new_view_m:  # no new view yet: step away
-                moved = robot.move(math.radians(params.lost_turn_deg), params.lost_step_m)
-                distance += abs(moved.moved_m)
+                at_place = faint
+            now = robot.odometry()
+            if math.dist((now.x_m, now.y_m), (began.x_m, began.y_m)) < params.lost_stuck_m:
+                seen_rad = matched_bearing_rad(observation)
+                if seen_rad is None:
+                    turn_rad = math.radians(params.lost_turn_deg)
+                else:  # the bearing was taken before the homing turned the robot
+                    turn_rad = seen_rad - (now.heading_rad - began.heading_rad)
+                distance += _step_away(
+                    robot, math.remainder(turn_rad, math.tau), params.lost_step_m
+                )
                 at_place = None
             localizer.predict(HOMING_STAY_PROBABILITY)
             observation = _look(localizer, robot, at_place)
@@ -389,6 +403,40 @@ def _to_confirm(
         return False
     homed_there = bool(visits) and visits[-1].room == room
     return belief.state is LocalizationState.LOCALIZED or homed_there
+
+
+def matched_bearing_rad(observation: Observation, min_features: int = 5) -> float | None:
+    """The robot-frame bearing (radians, CCW from the heading) of the mean direction of the
+    query's features that ``observation`` verified with any place; None when fewer than
+    ``min_features`` were verified, or when they surround the robot so evenly that their mean
+    direction is shorter than 0.1.
+
+    A robot woken in a corner, facing walls it matches nothing on, matches what lies across
+    the room: the two robots that ended ``lost`` 0.4-0.6 m from a bedroom's back wall on world
+    seed 47's recorded house matched 21 and 41 features, and their mean bearing pointed within
+    6° and 1° of the room's middle."""
+    verified = [
+        item.inlier_pairs[:, 0] for item in observation.evidence.places if len(item.inlier_pairs)
+    ]
+    if not verified:
+        return None
+    bearings_rad = observation.fingerprint.bearings_rad[np.unique(np.concatenate(verified))]
+    if len(bearings_rad) < min_features:
+        return None
+    mean = np.array([np.cos(bearings_rad).mean(), np.sin(bearings_rad).mean()])
+    if np.hypot(*mean) < 0.1:
+        return None
+    return float(np.arctan2(mean[1], mean[0]))
+
+
+def _step_away(robot: Robot, turn_rad: float, step_m: float) -> float:
+    """Turn by ``turn_rad`` and drive ``step_m``; a step that bumps before half of it is
+    driven the other way (turned round). Returns the distance driven (metres)."""
+    moved = robot.move(turn_rad, step_m)
+    driven = abs(moved.moved_m)
+    if moved.bumped and driven < step_m / 2:
+        driven += abs(robot.move(math.pi, step_m).moved_m)
+    return driven
 
 
 def _faintly_seen(observation: Observation, min_inliers: int, tried: set[int]) -> int | None:

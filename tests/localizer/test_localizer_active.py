@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import ENDINGS, ActiveParams, localize_actively, top_two_alike
+from localizer.active import (
+    ENDINGS,
+    ActiveParams,
+    localize_actively,
+    matched_bearing_rad,
+    top_two_alike,
+)
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
@@ -145,6 +151,58 @@ def test_a_lost_robot_whose_homing_drives_nowhere_steps_away_instead(localizer):
     assert result.first.state is LocalizationState.LOST
     assert robot.moved, "a homing that drove nowhere gives no new view: the robot steps away"
     assert result.final.top[0] == "kitchen"
+
+
+def test_a_lost_robot_steps_towards_the_features_its_look_matched(localizer):
+    # the first look sees only columns 0-127 (bearings 0 to -90 degrees): what it verifies
+    # lies there, and the homing drives nowhere
+    robot = StepAwayRobot(
+        SimulatedRobot.kidnapped(make_world("building"), "kitchen", seed=1, camera=CAMERA),
+        open_columns=128,
+    )
+    first = localizer.observe(robot.capture().image)
+    turns_deg = []
+
+    def stay(place_id: int) -> HomingResult:
+        return HomingResult(True, 0, 0.0, "arrived", first.fingerprint)
+
+    class Recorded(RobotWrapper):
+        def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+            turns_deg.append(np.degrees(turn_rad))
+            return super().move(turn_rad, forward_m)
+
+    localize_actively(localizer, Recorded(robot), "separating", home=stay)
+    assert turns_deg[0] == pytest.approx(np.degrees(matched_bearing_rad(first)))
+    assert -90.0 < turns_deg[0] < 0.0
+
+
+def test_a_look_that_verified_nothing_gives_no_bearing_to_step_towards(localizer):
+    blank = localizer.observe(BlindRobot().capture().image)
+    assert matched_bearing_rad(blank) is None
+
+
+class WalledRobot(BlindRobot):
+    """A blind robot with a wall in front of it: its first move bumps at once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.asked: list[tuple[float, float]] = []
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        self.asked.append((turn_rad, forward_m))
+        bumped = len(self.asked) == 1
+        return MoveResult(turn_rad, 0.0 if bumped else forward_m, bumped)
+
+
+def test_a_lost_robot_that_bumps_at_once_steps_the_other_way(localizer):
+    robot = WalledRobot()
+    params = ActiveParams(lost_looks=1)
+    result = localize_actively(localizer, robot, "most-likely", params)
+    assert robot.asked == [
+        (pytest.approx(np.radians(params.lost_turn_deg)), params.lost_step_m),
+        (pytest.approx(np.pi), params.lost_step_m),
+    ]
+    assert result.distance_m == pytest.approx(params.lost_step_m)
 
 
 def test_active_params_refuse_a_negative_budget():
