@@ -75,6 +75,14 @@ def test_the_reply_to_an_active_localization_says_how_it_went():
     assert render_watch(reply)[-1] == "active: 2 drives, 1.66 m; settled"
 
 
+def test_a_belief_that_waits_for_a_room_seen_in_part_says_why():
+    waiting = {
+        **belief({"office_b": 0.99, "lab": 0.01}, "ambiguous"),
+        "partly_seen": {"room": "office_b", "horizon_share": 0.4, "needed_share": 0.6},
+    }
+    assert render_watch(waiting)[-1].startswith("waits: office_b seen on 40% of the horizon")
+
+
 def test_a_stale_belief_and_an_ended_drive_say_so():
     stale = {**belief({"lab": 1.0}, "localized"), "stale": True, "age_s": 12.0}
     lines = render_watch(stale, progress(5, "arrived"))

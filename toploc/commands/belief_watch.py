@@ -29,7 +29,7 @@ import click
 import zenoh
 
 from toploc import bus
-from toploc.commands.belief_text import active_line, ranked_rooms, state_line
+from toploc.commands.belief_text import active_line, partly_seen_line, ranked_rooms, state_line
 from toploc.commands.bus_client import client_session
 
 if TYPE_CHECKING:  # imported when the watch runs (the node modules load more than click needs)
@@ -83,6 +83,9 @@ def render_watch(
             if best is None
             else f"best place: {best['place_id']} in {best['room']} ({best['inliers']} inliers)"
         )
+        waits = partly_seen_line(belief)
+        if waits is not None:
+            lines.append(waits)
         active = active_line(belief)  # the reply to an active localization, at its end
         if active is not None:
             lines.append(active)
