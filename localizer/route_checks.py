@@ -33,7 +33,7 @@ from localizer.routes import (
     DriveFrame,
     Route,
     drive_route,
-    route_beyond_m,
+    route_beyond,
     route_into,
     route_out,
     route_through,
@@ -217,11 +217,12 @@ def route_to_check(
     leave = {name for name, partners in localizer.lookalikes.items() if partners}
     doors = localizer.doors
     rooms = rooms_to_check(belief, checked)
-    beyond_m = functools.cache(
-        lambda room: route_beyond_m(
-            graph, places, room, localizer.lookalikes, doors, params.route_max_m
-        )
-    )
+
+    @functools.cache
+    def beyond_m(room: str) -> float:
+        route = route_beyond(graph, places, room, localizer.lookalikes, doors, params.route_max_m)
+        return math.inf if route is None else route.length_m
+
     for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
         starts = {
             room: sorted(
@@ -675,7 +676,7 @@ def _hall_check_alone(
     graph, places, lookalikes = localizer.map.legs, localizer.map.places, localizer.lookalikes
     return not any(
         lookalikes.get(twin)
-        and route_beyond_m(graph, places, twin, lookalikes, doors, params.route_max_m) < math.inf
+        and route_beyond(graph, places, twin, lookalikes, doors, params.route_max_m) is not None
         for twin in twins
     )
 

@@ -222,19 +222,6 @@ def route_beyond(
     )
 
 
-def route_beyond_m(
-    graph: nx.Graph,
-    places: Sequence[Place],
-    room: str,
-    lookalikes: Mapping[str, frozenset[str]],
-    doors: Mapping[str, frozenset[str]],
-    max_length_m: float,
-) -> float:
-    """The length (metres) of :func:`route_beyond`; inf if there is none."""
-    route = route_beyond(graph, places, room, lookalikes, doors, max_length_m)
-    return math.inf if route is None else route.length_m
-
-
 def rooms_with_routes_out(
     places: Sequence[Place],
     leave: Collection[str],
