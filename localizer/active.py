@@ -70,6 +70,15 @@ class ActiveParams:
     looked, and its frame is not folded into the belief again: the same view twice is one
     piece of evidence, not two (homing to a counterpart at the spot the robot stands on
     drives nowhere, and its frame repeated the last one's counts to the inlier).
+    ``end_at_place``: a belief ``localized`` on a frame not taken where the robot homed to a
+    place of its room is not the end: the robot homes to that room's place the frame matched
+    best and looks there (:func:`_place_to_end_at`), so the loop ends at a stored place of the
+    room it names. A robot set down in a doorway sees both rooms, and a place recorded near
+    the door may make the next room's the better view: on the recorded maps of world seeds
+    35-57 (960 single looks kidnapped into every room), 11 of the 379 ``localized`` looks were
+    wrong, 10 of them by robots whose centre stood 0.15-0.42 m from a door's centre, on the
+    side of the room they did not name; run whole, 6 ended sure and wrong, none with this
+    homing, which takes the robot through that door into the room it names.
     ``routes``: how a room is checked by a recorded route (:class:`RouteCheckParams`)."""
 
     max_targets: int = 4
@@ -80,6 +89,7 @@ class ActiveParams:
     lost_home_min_inliers: int = 4
     lost_stuck_m: float = 0.3
     min_new_view_m: float = 0.1
+    end_at_place: bool = True
     routes: RouteCheckParams = field(default_factory=RouteCheckParams)
 
     def __post_init__(self) -> None:
@@ -265,6 +275,8 @@ def localize_actively(
             continue
         if target is None:
             target = _closer_look(localizer, looked_closer)
+            if target is None and params.end_at_place and spent < params.max_targets:
+                target = _place_to_end_at(localizer, looked_closer)
             if target is not None:
                 looked_closer.add(target)
         if target is None:
@@ -347,6 +359,30 @@ def _closer_look(localizer: Localizer, looked: set[int]) -> int | None:
         return None
     places = [place.id for place in localizer.map.places if place.room == room]
     return next((place_id for place_id in places if place_id not in looked), None)
+
+
+def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
+    """The place to home to before a ``localized`` belief is taken
+    (:attr:`ActiveParams.end_at_place`): of the belief's room, the place the latest frame
+    verified with most spread inliers; None when the belief is not ``localized``, the latest
+    frame was taken where the robot homed to a place of that room (or to its counterpart on
+    one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of
+    its places for a closer look already (``looked``: once per room, even where that homing
+    did not move it), or the frame verified no place of it."""
+    belief, latest = localizer.belief(), localizer.latest
+    if belief.state is not LocalizationState.LOCALIZED or latest is None:
+        return None
+    room = belief.top[0]
+    homed = {localizer.map.place(place_id).room for place_id in looked}
+    if latest.at_place is not None:  # its counterparts on that spot were looked from too
+        for place_id in (latest.at_place, *localizer.same_spot_places(latest.at_place)):
+            homed.add(localizer.map.place(place_id).room)
+    if room in homed:
+        return None
+    seen = [item for item in latest.evidence.places if item.room == room and item.inliers > 0]
+    if not seen:
+        return None
+    return max(seen, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:

@@ -367,3 +367,48 @@ def test_drives_that_told_nothing_leave_the_budget_to_drives_that_tell(localizer
     assert len(result.visits) > params.max_targets >= len(told)
     assert all(not visit.homing.arrived for visit in result.visits if not visit.told)
     assert result.ended == "drive-limit"
+
+
+def _first_look_localized(localizer: Localizer) -> SimulatedRobot:
+    """A robot in the kitchen whose first look is ``localized`` (the seed searched for)."""
+    for seed in range(20):
+        robot = SimulatedRobot.kidnapped(
+            make_world("building"), "kitchen", seed=seed, camera=CAMERA
+        )
+        belief, _ = localizer.localize_once(robot.capture().image)
+        if belief.state is LocalizationState.LOCALIZED and belief.top[0] == "kitchen":
+            return robot
+    raise AssertionError("no kidnapping into the kitchen was localized at its first look")
+
+
+def test_a_localized_first_look_homes_to_its_rooms_best_matched_place_before_it_ends(localizer):
+    robot = _first_look_localized(localizer)
+    homed_to: list[int] = []
+
+    def stay(place_id: int) -> HomingResult:  # arrives where it stands: no second frame
+        homed_to.append(place_id)
+        return HomingResult(True, 0, 0.0, "arrived", localizer.map.fingerprint(place_id))
+
+    result = localize_actively(localizer, robot, "separating", home=stay)
+    first_look = localizer.latest
+    assert first_look is not None and result.first.state is LocalizationState.LOCALIZED
+    kitchen = [item for item in first_look.evidence.places if item.room == "kitchen"]
+    best = max(kitchen, key=lambda item: item.spread_inliers).place_id
+    assert homed_to == [best]
+    assert [visit.place_id for visit in result.visits] == [best]
+    assert result.final.top[0] == "kitchen" and result.ended == "settled"
+
+
+def test_a_localized_robot_ends_at_a_place_of_the_room_it_names(localizer):
+    robot = _first_look_localized(localizer)
+    result = localize_actively(localizer, robot, "separating")
+    assert result.final.state is LocalizationState.LOCALIZED
+    assert result.visits and result.visits[-1].room == result.final.top[0] == "kitchen"
+    assert robot.true_room() == "kitchen"
+
+
+def test_a_localized_first_look_may_be_taken_as_it_is(localizer):
+    robot = _first_look_localized(localizer)
+    result = localize_actively(localizer, robot, "separating", ActiveParams(end_at_place=False))
+    assert result.visits == () and robot.distance_driven_m == 0
+    assert result.final == result.first
