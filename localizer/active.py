@@ -366,9 +366,9 @@ def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
     (:attr:`ActiveParams.end_at_place`): of the belief's room, the place the latest frame
     verified with most spread inliers; None when the belief is not ``localized``, the latest
     frame was taken where the robot homed to a place of that room (or to its counterpart on
-    one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of
-    its places for a closer look already (``looked``: once per room, even where that homing
-    did not move it), or the frame verified no place of it."""
+    one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of its places for a
+    closer look already (``looked``: once per room, even where that homing did not move it),
+    or the frame verified no place of it."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
@@ -379,10 +379,9 @@ def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
             homed.add(localizer.map.place(place_id).room)
     if room in homed:
         return None
-    seen = [item for item in latest.evidence.places if item.room == room and item.inliers > 0]
-    if not seen:
-        return None
-    return max(seen, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
+    return _best_matched(
+        [item for item in latest.evidence.places if item.room == room and item.inliers > 0]
+    )
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:
@@ -478,14 +477,21 @@ def _step_away(robot: Robot, turn_rad: float, step_m: float) -> float:
 def _faintly_seen(observation: Observation, min_inliers: int, tried: set[int]) -> int | None:
     """The place ``observation`` matched best (most spread inliers) among those with at least
     ``min_inliers`` verified inliers and not in ``tried``; None if there is none."""
-    seen = [
-        item
-        for item in observation.evidence.places
-        if item.inliers >= min_inliers and item.place_id not in tried
-    ]
-    if not seen:
+    return _best_matched(
+        [
+            item
+            for item in observation.evidence.places
+            if item.inliers >= min_inliers and item.place_id not in tried
+        ]
+    )
+
+
+def _best_matched(items: Sequence[PlaceScore]) -> int | None:
+    """The id of the place of ``items`` with most spread inliers (ties: the lower id); None
+    for no items."""
+    if not items:
         return None
-    return max(seen, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
+    return max(items, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
 
 
 def _may_drive(belief: RoomBelief, drives: int, max_targets: int) -> bool:
