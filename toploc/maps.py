@@ -18,6 +18,7 @@ import os
 import sys
 from pathlib import Path
 
+from filelock import FileLock, Timeout
 from tqdm import tqdm
 
 from localizer.calibration import MAX_QUERIES, calibrate, motions_to_try
@@ -45,6 +46,8 @@ from toploc.extraction import map_overrides, resolve_extractor
 from toploc.map_index import compact_index
 
 HOME_ENV = "TOPLOC_HOME"
+CACHE_LOCK_NAME = "making.lock"
+"""The lock file in a cached world map's folder that :func:`ensure_world_map` holds."""
 
 ON_DISK_MIN_PLACES = 1000
 """From this many places a map's fingerprints stay on disk and its shortlist is the compact
@@ -185,8 +188,32 @@ def ensure_world_map(
 ) -> Path:
     """The map of the preset ``world`` (rendered with ``seed``, default condition), made if
     missing or made by an older toploc (:func:`outdated_cache_map`, said on stderr); returns
-    the database path ``<root>/<world>-<seed>/map.db``."""
+    the database path ``<root>/<world>-<seed>/map.db``.
+
+    Made under the folder's lock file (:data:`CACHE_LOCK_NAME`): two toploc commands started
+    at once on a fresh machine (``toploc sim kidnap`` twice, say) both made the map into one
+    database, and one failed with ``table "rooms" already exists``; the second now waits,
+    saying so on stderr, and then finds the map made."""
     folder = (root or cache_dir()) / f"{world}-{seed}"
+    folder.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(folder / CACHE_LOCK_NAME)
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        _said_waiting(f"{folder}: another toploc is making this map; waiting for it")
+        lock.acquire()
+    try:
+        return _ensure_world_map(world, folder, detector, seed, progress)
+    finally:
+        lock.release()
+
+
+def _said_waiting(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def _ensure_world_map(world: str, folder: Path, detector: str, seed: int, progress: bool) -> Path:
+    """:func:`ensure_world_map`'s work in ``folder``, its lock held."""
     dataset, db_path = folder / "dataset", folder / "map.db"
     done_marker = folder / f"built-{detector}"
     if done_marker.exists() and db_path.exists():
@@ -201,7 +228,7 @@ def ensure_world_map(
             else f"not as toploc built it ({changed})"
         )
         print(f"{db_path}: {why}; making it again", file=sys.stderr)
-        done_marker.unlink(missing_ok=True)  # another process may be remaking it too
+        done_marker.unlink(missing_ok=True)
         for suffix in ("", "-wal", "-shm"):
             db_path.with_name(db_path.name + suffix).unlink(missing_ok=True)
     if not (dataset / MANIFEST_NAME).exists():

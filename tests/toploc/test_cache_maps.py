@@ -9,13 +9,20 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from filelock import FileLock, Timeout
 
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
 from mapdb.database import MapDatabase
 from mapdb.records import NewPlace
-from toploc.maps import changed_cache_map, ensure_world_map, outdated_cache_map
+from toploc import maps
+from toploc.maps import (
+    CACHE_LOCK_NAME,
+    changed_cache_map,
+    ensure_world_map,
+    outdated_cache_map,
+)
 
 
 def panorama(seed: int) -> np.ndarray:
@@ -113,3 +120,47 @@ def test_a_cached_world_map_as_built_is_reused_without_a_word(
     assert changed_cache_map(db_path, tmp_path / "square-0" / "dataset") is None
     assert ensure_world_map("square", root=tmp_path, progress=False) == db_path
     assert capsys.readouterr().err == ""
+
+
+def test_a_cached_world_map_is_made_by_one_process_at_a_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    square_dataset(tmp_path / "square-0")
+    build_map = maps.build_map
+    held = []
+
+    def build_map_checking_the_lock(*args, **kwargs):
+        other = FileLock(tmp_path / "square-0" / CACHE_LOCK_NAME)  # as another process would
+        with pytest.raises(Timeout):
+            other.acquire(timeout=0)
+        held.append(True)
+        return build_map(*args, **kwargs)
+
+    monkeypatch.setattr(maps, "build_map", build_map_checking_the_lock)
+    ensure_world_map("square", root=tmp_path, progress=False)
+    assert held == [True]
+    other = FileLock(tmp_path / "square-0" / CACHE_LOCK_NAME)
+    other.acquire(timeout=0)  # released once the map is made
+    other.release()
+
+
+def test_a_process_that_finds_the_map_being_made_says_it_waits(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    square_dataset(tmp_path / "square-0")
+    db_path = ensure_world_map("square", root=tmp_path, progress=False)
+    capsys.readouterr()
+    other = FileLock(tmp_path / "square-0" / CACHE_LOCK_NAME)
+    other.acquire()
+    released = False
+
+    def release_when_asked_to_wait(message: str) -> None:
+        nonlocal released
+        if "another toploc is making this map; waiting for it" in message and not released:
+            released = True
+            other.release()  # the other process finishes: the wait ends
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(maps, "_said_waiting", release_when_asked_to_wait)
+        assert ensure_world_map("square", root=tmp_path, progress=False) == db_path
+    assert released
