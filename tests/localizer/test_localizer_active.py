@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
@@ -18,6 +20,7 @@ from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from localizer.visual_homing import CANCELLED, HomingResult, drive_home
 from mapdb.loading import load_snapshot
+from mapdb.records import Leg
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
@@ -412,3 +415,85 @@ def test_a_localized_first_look_may_be_taken_as_it_is(localizer):
     result = localize_actively(localizer, robot, "separating", ActiveParams(end_at_place=False))
     assert result.visits == () and robot.distance_driven_m == 0
     assert result.final == result.first
+
+
+class _MoveLog(RobotWrapper):
+    """The simulated robot, noting the true (building-frame) pose before and after each move."""
+
+    def __init__(self, robot: SimulatedRobot) -> None:
+        super().__init__(robot)
+        self.sim = robot
+        self.moves: list[tuple[Pose2D, Pose2D]] = []
+
+    def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+        before = self.sim.true_pose
+        moved = self.sim.move(turn_rad, forward_m)
+        self.moves.append((before, self.sim.true_pose))
+        return moved
+
+
+def _entered_from(
+    localizer: Localizer, place_id: int, way_in_rad: float, room: str = "corridor"
+) -> Localizer:
+    """``localizer``'s map with place ``place_id`` recorded at the end of a 2 m drive along
+    ``way_in_rad`` (the place's room frame, which is the building's shifted) from a place of
+    ``room`` (its pose moved to the drive's start)."""
+    place = localizer.map.place(place_id)
+    other = next(p for p in localizer.map.places if p.room == room and p.id != place_id)
+    assert place.x_m is not None and place.y_m is not None
+    ux, uy = np.cos(way_in_rad), np.sin(way_in_rad)
+    start = replace(other, x_m=place.x_m - 2.0 * ux, y_m=place.y_m - 2.0 * uy)
+    via = tuple((place.x_m - d * ux, place.y_m - d * uy) for d in np.arange(1.9, 0.05, -0.1))
+    entered = replace(place, leg=Leg(start.id, via))
+    swap = {start.id: start, entered.id: entered}
+    places = tuple(swap.get(p.id, p) for p in localizer.map.places)
+    return Localizer(replace(localizer.map, places=places))
+
+
+def _kitchen_way_in(localizer: Localizer) -> tuple[SimulatedRobot, int, float]:
+    """A kitchen robot localized at its first look, the kitchen place that look matched best
+    and the bearing from that place to the kitchen's middle (room frame, radians)."""
+    robot = _first_look_localized(localizer)
+    localizer.localize_once(robot.capture().image)
+    assert localizer.latest is not None
+    kitchen = [item for item in localizer.latest.evidence.places if item.room == "kitchen"]
+    place = localizer.map.place(max(kitchen, key=lambda item: item.spread_inliers).place_id)
+    width_m, depth_m = make_world("building").room("kitchen").size_m
+    assert place.x_m is not None and place.y_m is not None
+    return robot, place.id, float(np.arctan2(depth_m / 2 - place.y_m, width_m / 2 - place.x_m))
+
+
+def test_a_robot_localized_at_a_place_recorded_on_the_way_in_steps_further_in(localizer):
+    robot, place_id, way_in = _kitchen_way_in(localizer)
+    moves = _MoveLog(robot)
+    entered = _entered_from(localizer, place_id, way_in)
+    result = localize_actively(entered, moves, "separating")
+    assert result.final.state is LocalizationState.LOCALIZED and result.final.top[0] == "kitchen"
+    assert result.visits[-1].place_id == place_id
+    assert entered.latest is not None and entered.latest.at_place is None  # looked past it
+    before, after = moves.moves[-1]  # the last move is the step in, looked at and settled
+    stepped_m = np.hypot(after.x_m - before.x_m, after.y_m - before.y_m)
+    assert 0.3 < stepped_m <= ActiveParams().step_in_m + 0.05
+    heading = np.arctan2(after.y_m - before.y_m, after.x_m - before.x_m)
+    assert abs(np.remainder(heading - way_in + np.pi, 2 * np.pi) - np.pi) < np.radians(25)
+
+
+def test_a_place_recorded_on_a_drive_within_its_room_gives_no_step_in(localizer):
+    robot, place_id, way_in = _kitchen_way_in(localizer)
+    within = _entered_from(localizer, place_id, way_in, room="kitchen")
+    result = localize_actively(within, robot, "separating")
+    assert result.visits[-1].place_id == place_id
+    assert within.latest is not None and within.latest.at_place == place_id  # looked there last
+
+
+def test_a_step_in_of_zero_is_no_step(localizer):
+    robot, place_id, way_in = _kitchen_way_in(localizer)
+    entered = _entered_from(localizer, place_id, way_in)
+    localize_actively(entered, robot, "separating", ActiveParams(step_in_m=0.0))
+    assert entered.latest is not None and entered.latest.at_place == place_id
+
+
+def test_active_params_refuse_a_step_in_that_is_not_a_distance():
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="step_in_m"):
+            ActiveParams(step_in_m=bad)

@@ -21,6 +21,7 @@ from localizer.routes import (
     route_into,
     route_out,
     route_through,
+    way_in_rad,
 )
 from mapdb.records import Leg, Place
 
@@ -223,3 +224,51 @@ def test_a_way_back_that_no_recording_made_runs_through_its_points() -> None:
     back = route_through((1.0, 3.0), [(1.0, 0.0), (0.0, 0.0)])
     assert back.waypoints_xy_m == ((1.0, 0.0), (0.0, 0.0))
     assert back.length_m == pytest.approx(4.0)
+
+
+HALL = Place(10, "hall", -2.0, 0.0, 0.0)
+"""A place in the hall, 2 m before a door on the line x = 0 into the room at x > 0."""
+
+
+def _entered(x_m: float, y_m: float, via: tuple[tuple[float, float], ...]) -> Place:
+    return Place(11, "room", x_m, y_m, 0.0, leg=Leg(HALL.id, via))
+
+
+def test_the_way_in_is_the_drive_through_the_door_to_the_place() -> None:
+    place = _entered(1.0, 0.0, ((-1.0, 0.0), (0.0, 0.0), (0.5, 0.0)))
+    assert way_in_rad(place, HALL) == pytest.approx(0.0)
+
+
+def test_the_way_in_points_into_the_room_from_a_place_turned_back_towards_the_door() -> None:
+    # through the door to 0.6 m in, then a turn and 0.5 m back, 0.15 m from the door line
+    back_rad = math.radians(160.0)
+    x_m, y_m = 0.6 + 0.5 * math.cos(back_rad), 0.5 * math.sin(back_rad)
+    place = _entered(x_m, y_m, ((-0.6, 0.0), (0.6, 0.0)))
+    bearing_rad = way_in_rad(place, HALL)
+    assert bearing_rad is not None and math.cos(bearing_rad) > 0.5  # into the room, x > 0
+
+
+@given(
+    st.floats(-math.pi, math.pi),
+    st.floats(0.7, 5.0),
+    st.floats(-10.0, 10.0),
+    st.floats(-10.0, 10.0),
+)
+def test_a_straight_leg_goes_in_along_its_own_heading(
+    heading_rad: float, length_m: float, x0_m: float, y0_m: float
+) -> None:
+    ux, uy = math.cos(heading_rad), math.sin(heading_rad)
+    start = Place(10, "hall", x0_m, y0_m, 0.0)
+    via = tuple((x0_m + ux * k * 0.1, y0_m + uy * k * 0.1) for k in range(1, int(length_m * 10)))
+    place = Place(11, "room", x0_m + ux * length_m, y0_m + uy * length_m, 0.0, leg=Leg(10, via))
+    bearing_rad = way_in_rad(place, start)
+    assert bearing_rad is not None
+    assert math.remainder(bearing_rad - heading_rad, math.tau) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_no_way_in_for_a_leg_within_its_room_or_a_place_without_pose_or_leg() -> None:
+    via = ((-1.0, 0.0), (0.0, 0.0))
+    assert way_in_rad(_entered(1.0, 0.0, via), Place(10, "room", -2.0, 0.0, 0.0)) is None
+    assert way_in_rad(Place(11, "room", None, None, None, leg=Leg(10, via)), HALL) is None
+    assert way_in_rad(Place(11, "room", 1.0, 0.0, 0.0), HALL) is None
+    assert way_in_rad(_entered(1.0, 0.0, via), Place(9, "hall", -2.0, 0.0, 0.0)) is None
