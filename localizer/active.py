@@ -91,7 +91,7 @@ class ActiveParams:
     ``step_in_m``: a belief ``localized`` on a frame taken at a place of its room recorded on
     a drive in from another room (the first place after a door, where a user records as soon
     as the robot is through it) is looked at once more ``step_in_m`` further in, along the way
-    the drive came in (:func:`_step_in`): homing arrives within about 0.3 m of a place, and by
+    the drive came in (:func:`_way_in_step`): homing arrives within about 0.3 m of a place, and by
     a door that may be the far side of it (world seed 59's house recorded one place per room:
     a robot homed to bedroom_a's place, recorded about 0.2 m inside by the door, said
     bedroom_a at 0.962 standing 1 cm into the hall). 0 turns it off.
@@ -300,10 +300,14 @@ def localize_actively(
             if target is not None:
                 looked_closer.add(target)
         if target is None and params.step_in_m > 0:
-            stepped = _step_in(localizer, robot, params.step_in_m, params.homing.step, stepped_in)
-            if stepped is not None:
+            step_in = _way_in_step(localizer, params.step_in_m, params.homing.step, stepped_in)
+            if step_in is not None:
+                frame, inside = step_in
                 looked_closer.update(stepped_in)  # its room is looked at: do not home back
-                distance += stepped
+                notify(localizer.belief(LocalizationState.HOMING))
+                here = frame.pose(robot.odometry())
+                route = route_through((here.x_m, here.y_m), [inside])
+                distance += drive_route(robot, route, frame).distance_m
                 localizer.predict(HOMING_STAY_PROBABILITY)
                 observation = _look(localizer, robot)
                 belief = localizer.update(observation)
@@ -415,18 +419,18 @@ def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
     )
 
 
-def _step_in(
-    localizer: Localizer, robot: Robot, step_m: float, step: StepParams, stepped: set[int]
-) -> float | None:
-    """Drive ``step_m`` further into the room the belief is ``localized`` in, when the latest
-    frame was taken at a place of that room recorded on a drive in from another room
-    (:attr:`ActiveParams.step_in_m`): along the way the drive came in
-    (:func:`~localizer.routes.way_in_rad`), the robot's heading in the drive frame fixed by
-    that frame's rotation against the place's stored view, the robot taken to stand at the
-    place. A step that bumps slides past as a route does (:func:`~localizer.routes.drive_route`:
-    a robot homed into a doorway off its middle meets the door frame). Returns the distance
-    driven (metres, odometric), or None when there is no such place, it is in ``stepped``
-    (added to it: once per place), or the frame does not match its view."""
+def _way_in_step(
+    localizer: Localizer, step_m: float, step: StepParams, stepped: set[int]
+) -> tuple[DriveFrame, tuple[float, float]] | None:
+    """Where to drive ``step_m`` further into the room the belief is ``localized`` in, when the
+    latest frame was taken at a place of that room recorded on a drive in from another room
+    (:attr:`ActiveParams.step_in_m`): a point along the way the drive came in
+    (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it in, fixed by
+    the robot standing at the place when it took that frame, its heading by the frame's
+    rotation against the place's stored view. Driven as a route (a step that bumps slides
+    past: a robot homed into a doorway off its middle meets the door frame). None when there
+    is no such place, it is in ``stepped`` (added to it: once per place), or the frame does
+    not match its view."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
@@ -454,9 +458,7 @@ def _step_in(
         place.x_m + step_m * math.cos(bearing_rad),
         place.y_m + step_m * math.sin(bearing_rad),
     )
-    frame = DriveFrame(at, latest.odometry)  # the robot taken to stand at the place
-    here = frame.pose(robot.odometry())
-    return drive_route(robot, route_through((here.x_m, here.y_m), [inside]), frame).distance_m
+    return DriveFrame(at, latest.odometry), inside
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:
