@@ -42,8 +42,9 @@ towards what a lost robot matched on the lost robots of seeds 39-53 and judged i
 end at a place of the named room on single looks at the recorded maps of seeds 35-57 and
 judged it on seeds 59 and 61 (record seeds 60 and 62). Session 37 wrote its step into the
 room from a place recorded past a door on the two sure-and-wrong door answers of seeds 51 and
-59 and judged it on seed 63 (record seed 64). World seeds 65 and up have not been looked at:
-the next change must be judged on them.
+59 and judged it on seed 63 (record seed 64), then measured its final code once on seed 65
+(record seed 66), no change written on it. World seeds 67 and up have not been looked at: the
+next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
