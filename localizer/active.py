@@ -24,24 +24,23 @@ from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
 from localizer.policy import Policy, PolicyContext, make_policy
-from localizer.robot_protocol import Pose2D, Robot
+from localizer.robot_protocol import Robot
 from localizer.route_checks import (
     RouteCheck,
     RouteCheckParams,
     check_route,
     likely_twin,
+    place_frame,
     route_to_check,
     told_outcomes,
 )
 from localizer.routes import DriveFrame, drive_route, route_through, way_in_rad
 from localizer.visual_homing import (
     CANCELLED,
-    HomingError,
     HomingParams,
     HomingResult,
     StepParams,
     drive_home,
-    matched_inliers,
 )
 from mapdb.records import Place
 
@@ -427,7 +426,8 @@ def _way_in_step(
     (:attr:`ActiveParams.step_in_m`): a point along the way the drive came in
     (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it in, fixed by
     the robot standing at the place when it took that frame, its heading by the frame's
-    rotation against the place's stored view. Driven as a route (a step that bumps slides
+    rotation against the place's stored view (:func:`~localizer.route_checks.place_frame`,
+    as a route check fixes its frame at a place). Driven as a route (a step that bumps slides
     past: a robot homed into a doorway off its middle meets the door frame). None when there
     is no such place, it is in ``stepped`` (added to it: once per place), or the frame does
     not match its view."""
@@ -437,7 +437,7 @@ def _way_in_step(
     if latest.at_place is None or latest.at_place in stepped or latest.odometry is None:
         return None
     place = localizer.map.place(latest.at_place)
-    if place.room != belief.top[0] or place.leg is None or place.heading_deg is None:
+    if place.room != belief.top[0] or place.leg is None:
         return None
     stepped.add(place.id)
     try:
@@ -447,18 +447,14 @@ def _way_in_step(
     bearing_rad = way_in_rad(place, start)
     if bearing_rad is None:
         return None
-    try:
-        stored = localizer.map.fingerprint(place.id)
-        _, shift_rad = matched_inliers(latest.fingerprint, stored, step)
-    except HomingError:
+    frame = place_frame(localizer, place.id, latest.fingerprint, latest.odometry, step)
+    if frame is None:
         return None
-    assert place.x_m is not None and place.y_m is not None  # way_in_rad needs a position
-    at = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg) - shift_rad)
     inside = (
-        place.x_m + step_m * math.cos(bearing_rad),
-        place.y_m + step_m * math.sin(bearing_rad),
+        frame.at.x_m + step_m * math.cos(bearing_rad),
+        frame.at.y_m + step_m * math.sin(bearing_rad),
     )
-    return DriveFrame(at, latest.odometry), inside
+    return frame, inside
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:

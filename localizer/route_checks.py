@@ -303,7 +303,7 @@ def check_route(
         homing.step,
         math.radians(params.compass_min_turn_deg),
     )
-    frame = _frame_by_view(steered, view, stored, to_start, homing.step)
+    frame = frame_by_view(to_start.last, view, stored, steered.odometry(), homing.step)
     if frame is not None and to_start.arrived:  # a route driven from elsewhere tells nothing
         marks: list[_Mark] = []
 
@@ -413,19 +413,32 @@ def check_route(
     return check, frames, at_end, homed_to
 
 
-def _frame_by_view(
-    robot: Robot, view: Fingerprint, pose: Pose2D, homed: HomingResult, step: StepParams
+def frame_by_view(
+    current: Fingerprint, view: Fingerprint, pose: Pose2D, odometry: Pose2D, step: StepParams
 ) -> DriveFrame | None:
-    """A drive frame fixed for a robot that has just homed to ``view``, taken at ``pose`` in
-    that frame (a place's stored view and pose, or a view the robot took on the drive and its
-    odometry then): the robot at ``pose``'s position, its heading ``pose``'s turned by the
-    rotation between its last view and ``view``; None if they do not match."""
+    """A drive frame fixed for a robot whose view ``current`` (taken at odometry ``odometry``,
+    the robot not moved since) was taken where ``view`` was, at ``pose`` in that frame (a
+    place's stored view and pose, or a view the robot took on the drive and its odometry
+    then): the robot at ``pose``'s position, its heading ``pose``'s turned by the rotation
+    between ``current`` and ``view``; None if they do not match."""
     try:
-        _, shift_rad = matched_inliers(homed.last, view, step)
+        _, shift_rad = matched_inliers(current, view, step)
     except HomingError:
         return None
     at = Pose2D(pose.x_m, pose.y_m, pose.heading_rad - shift_rad)
-    return DriveFrame(at, robot.odometry())
+    return DriveFrame(at, odometry)
+
+
+def place_frame(
+    localizer: Localizer, place_id: int, current: Fingerprint, odometry: Pose2D, step: StepParams
+) -> DriveFrame | None:
+    """:func:`frame_by_view` for place ``place_id``'s stored view and pose; None if the place
+    has no stored pose or the views do not match."""
+    place = localizer.map.place(place_id)
+    if place.x_m is None or place.y_m is None or place.heading_deg is None:
+        return None
+    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
+    return frame_by_view(current, localizer.map.fingerprint(place_id), stored, odometry, step)
 
 
 @dataclass(frozen=True)
@@ -472,7 +485,7 @@ def _back_by_marks(
         distance += homed.distance_m
         frames += len(homed.lengths)
         again = (
-            _frame_by_view(robot, mark.view, mark.pose, homed, homing.step)
+            frame_by_view(homed.last, mark.view, mark.pose, robot.odometry(), homing.step)
             if homed.arrived
             else None
         )
@@ -544,11 +557,9 @@ def _known_frame(
 ) -> DriveFrame | None:
     """The drive frame fixed by place ``place_id``'s stored view and pose, where ``homed``
     arrived; None if it did not, the place has no stored pose or the views do not match."""
-    place = localizer.map.place(place_id)
-    if not homed.arrived or place.x_m is None or place.y_m is None or place.heading_deg is None:
+    if not homed.arrived:
         return None
-    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
-    return _frame_by_view(robot, localizer.map.fingerprint(place_id), stored, homed, step)
+    return place_frame(localizer, place_id, homed.last, robot.odometry(), step)
 
 
 def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
