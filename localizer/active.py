@@ -89,11 +89,12 @@ class ActiveParams:
     homing, which takes the robot through that door into the room it names.
     ``step_in_m``: a belief ``localized`` on a frame taken at a place of its room recorded on
     a drive in from another room (the first place after a door, where a user records as soon
-    as the robot is through it) is looked at once more ``step_in_m`` further in, along the way
-    the drive came in (:func:`_way_in_step`): homing arrives within about 0.3 m of a place, and by
-    a door that may be the far side of it (world seed 59's house recorded one place per room:
-    a robot homed to bedroom_a's place, recorded about 0.2 m inside by the door, said
-    bedroom_a at 0.962 standing 1 cm into the hall). 0 turns it off.
+    as the robot is through it) is looked at once more from the point ``step_in_m`` past the
+    place along the way the drive came in, driven to from where homing left the robot
+    (:func:`_way_in_step`): homing arrives within about 0.3 m of a place, and by a door that
+    may be the far side of it (world seed 59's house recorded one place per room: a robot
+    homed to bedroom_a's place, recorded about 0.2 m inside by the door, said bedroom_a at
+    0.962 standing 1 cm into the hall). 0 turns it off.
     ``routes``: how a room is checked by a recorded route (:class:`RouteCheckParams`)."""
 
     max_targets: int = 4
@@ -421,16 +422,16 @@ def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
 def _way_in_step(
     localizer: Localizer, step_m: float, step: StepParams, stepped: set[int]
 ) -> tuple[DriveFrame, tuple[float, float]] | None:
-    """Where to drive ``step_m`` further into the room the belief is ``localized`` in, when the
-    latest frame was taken at a place of that room recorded on a drive in from another room
-    (:attr:`ActiveParams.step_in_m`): a point along the way the drive came in
-    (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it in, fixed by
-    the robot standing at the place when it took that frame, its heading by the frame's
-    rotation against the place's stored view (:func:`~localizer.route_checks.place_frame`,
-    as a route check fixes its frame at a place). Driven as a route (a step that bumps slides
-    past: a robot homed into a doorway off its middle meets the door frame). None when there
-    is no such place, it is in ``stepped`` (added to it: once per place), or the frame does
-    not match its view."""
+    """Where to drive further into the room the belief is ``localized`` in, when the latest
+    frame was taken at a place of that room recorded on a drive in from another room
+    (:attr:`ActiveParams.step_in_m`): the point ``step_m`` past the place along the way the
+    drive came in (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it
+    in, fixed by the robot standing at the place when it took that frame, its heading by the
+    frame's rotation against the place's stored view
+    (:func:`~localizer.route_checks.place_frame`, as a route check fixes its frame at a
+    place). Driven as a route (a step that bumps slides past: a robot homed into a doorway off
+    its middle meets the door frame). None when there is no such place, it is in ``stepped``
+    (added to it: once per place), or the frame does not match its view."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
