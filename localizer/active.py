@@ -24,7 +24,7 @@ from localizer.belief import LocalizationState, RoomBelief
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
 from localizer.policy import Policy, PolicyContext, make_policy
-from localizer.robot_protocol import Robot
+from localizer.robot_protocol import Pose2D, Robot
 from localizer.route_checks import (
     RouteCheck,
     RouteCheckParams,
@@ -236,16 +236,9 @@ def localize_actively(
                     ended = CANCELLED
                     break
                 at_place = faint
-            now = robot.odometry()
-            if math.dist((now.x_m, now.y_m), (began.x_m, began.y_m)) < params.lost_stuck_m:
-                seen_rad = matched_bearing_rad(observation)
-                if seen_rad is None:
-                    turn_rad = math.radians(params.lost_turn_deg)
-                else:  # the bearing was taken before the homing turned the robot
-                    turn_rad = seen_rad - (now.heading_rad - began.heading_rad)
-                distance += _step_away(
-                    robot, math.remainder(turn_rad, math.tau), params.lost_step_m
-                )
+            stepped_m = _step_away_if_stuck(robot, observation, began, params)
+            if stepped_m is not None:
+                distance += stepped_m
                 at_place = None
             localizer.predict(HOMING_STAY_PROBABILITY)
             observation = _look(localizer, robot, at_place)
@@ -277,9 +270,15 @@ def localize_actively(
             rival = likely_twin(belief, start.room, localizer.lookalikes)
             notify(localizer.belief(LocalizationState.HOMING))
             told = told_outcomes(checks, start.room)
+            began = robot.odometry()
             done, captured, homing, homed_to = check_route(
                 localizer, robot, go, start, route, rival, params.routes, params.homing, told
             )
+            if not done.started and homed_to is None and homing.reason != CANCELLED:
+                # the homing to the check's start gave up where it began: out of that corner
+                # before the next check (world seed 63's building, two places per room: a
+                # robot woken between a cabinet and the wall spent its four checks there)
+                distance += _step_away_if_stuck(robot, observation, began, params) or 0.0
             localizer.predict(HOMING_STAY_PROBABILITY)
             observation, looked = _look_again(localizer, robot, homed_to)
             distance += done.distance_m
@@ -536,6 +535,25 @@ def matched_bearing_rad(observation: Observation, min_features: int = 5) -> floa
     if np.hypot(*mean) < 0.1:
         return None
     return float(np.arctan2(mean[1], mean[0]))
+
+
+def _step_away_if_stuck(
+    robot: Robot, observation: Observation, began: Pose2D, params: ActiveParams
+) -> float | None:
+    """If the robot stands less than ``params.lost_stuck_m`` from ``began`` (odometry, where it
+    took ``observation``), step ``params.lost_step_m`` towards the features ``observation``
+    verified (:func:`matched_bearing_rad`, turned back by the turns made since), or after a
+    turn of ``params.lost_turn_deg`` when too few were verified to say where. Returns the
+    distance driven (metres), or None when the robot was not stuck."""
+    now = robot.odometry()
+    if math.dist((now.x_m, now.y_m), (began.x_m, began.y_m)) >= params.lost_stuck_m:
+        return None
+    seen_rad = matched_bearing_rad(observation)
+    if seen_rad is None:
+        turn_rad = math.radians(params.lost_turn_deg)
+    else:  # the bearing was taken before the homing turned the robot
+        turn_rad = seen_rad - (now.heading_rad - began.heading_rad)
+    return _step_away(robot, math.remainder(turn_rad, math.tau), params.lost_step_m)
 
 
 def _step_away(robot: Robot, turn_rad: float, step_m: float) -> float:

@@ -497,3 +497,37 @@ def test_active_params_refuse_a_step_in_that_is_not_a_distance():
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="step_in_m"):
             ActiveParams(step_in_m=bad)
+
+
+def test_a_robot_whose_homing_to_a_checks_start_gives_up_where_it_began_steps_away(localizer):
+    """A robot in office_a, both offices alike at its first look: the route check of an office
+    starts with a homing to its place; one that gives up where it began (the robot woken
+    between furniture and a wall) is followed by a step towards what the look matched, not by
+    the next check from the same corner."""
+    office = next(p.id for p in localizer.map.places if p.room == "office_a")
+    kitchen = next(p for p in localizer.map.places if p.room == "kitchen")
+    assert kitchen.x_m is not None and kitchen.y_m is not None
+    routed = _entered_from(localizer, kitchen.id, 0.0, room="office_a")  # office_a -> kitchen
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+    first = routed.observe(robot.capture().image)
+    turns: list[tuple[float, float]] = []
+    homed: list[int] = []
+
+    class Recorded(RobotWrapper):
+        def move(self, turn_rad: float, forward_m: float) -> MoveResult:
+            turns.append((turn_rad, forward_m))
+            return super().move(turn_rad, forward_m)
+
+    def stuck(place_id: int) -> HomingResult:  # every homing gives up where it began
+        homed.append(place_id)
+        return HomingResult(False, 0, 0.0, "converged", localizer.map.fingerprint(place_id))
+
+    params = ActiveParams()
+    result = localize_actively(routed, Recorded(robot), "separating", params, home=stuck)
+    assert result.first.state is LocalizationState.AMBIGUOUS
+    assert result.checks and not result.checks[0].started
+    assert homed[0] == result.checks[0].start == office
+    step_rad = matched_bearing_rad(first)
+    assert step_rad is not None and turns, "the robot must step out of where it gave up"
+    assert turns[0] == (pytest.approx(step_rad), params.lost_step_m)
+    assert result.distance_m == pytest.approx(robot.distance_driven_m, abs=1e-6)
