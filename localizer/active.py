@@ -74,6 +74,8 @@ class ActiveParams:
     steps towards the features the look verified with any place (:func:`matched_bearing_rad`:
     in a room's corner they lie across the room), or turns by ``lost_turn_deg`` first when
     too few were verified to say where; a step that bumps at once is driven the other way.
+    A route check whose homing to its start place gives up that close to where it began,
+    the robot at no place, is followed by the same step (:func:`_step_away_if_stuck`).
     ``min_new_view_m``: a drive shorter than this (odometric) ends where the robot already
     looked, and its frame is not folded into the belief again: the same view twice is one
     piece of evidence, not two (homing to a counterpart at the spot the robot stands on
