@@ -499,15 +499,30 @@ def test_active_params_refuse_a_step_in_that_is_not_a_distance():
             ActiveParams(step_in_m=bad)
 
 
+def _office_a_routed_to_the_kitchen(localizer: Localizer) -> tuple[int, Localizer]:
+    """An office_a place and ``localizer``'s map with a kitchen place recorded on a drive from
+    it: the one route out of an office, to check office_a by."""
+    office = next(p.id for p in localizer.map.places if p.room == "office_a")
+    kitchen = next(p.id for p in localizer.map.places if p.room == "kitchen")
+    return office, _entered_from(localizer, kitchen, 0.0, room="office_a")
+
+
+def _stuck(localizer: Localizer, homed: list[int]):
+    """A homing that gives up where it began, noting the places asked for in ``homed``."""
+
+    def home(place_id: int) -> HomingResult:
+        homed.append(place_id)
+        return HomingResult(False, 0, 0.0, "converged", localizer.map.fingerprint(place_id))
+
+    return home
+
+
 def test_a_robot_whose_homing_to_a_checks_start_gives_up_where_it_began_steps_away(localizer):
     """A robot in office_a, both offices alike at its first look: the route check of an office
     starts with a homing to its place; one that gives up where it began (the robot woken
     between furniture and a wall) is followed by a step towards what the look matched, not by
     the next check from the same corner."""
-    office = next(p.id for p in localizer.map.places if p.room == "office_a")
-    kitchen = next(p for p in localizer.map.places if p.room == "kitchen")
-    assert kitchen.x_m is not None and kitchen.y_m is not None
-    routed = _entered_from(localizer, kitchen.id, 0.0, room="office_a")  # office_a -> kitchen
+    office, routed = _office_a_routed_to_the_kitchen(localizer)
     robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
     first = routed.observe(robot.capture().image)
     turns: list[tuple[float, float]] = []
@@ -518,12 +533,10 @@ def test_a_robot_whose_homing_to_a_checks_start_gives_up_where_it_began_steps_aw
             turns.append((turn_rad, forward_m))
             return super().move(turn_rad, forward_m)
 
-    def stuck(place_id: int) -> HomingResult:  # every homing gives up where it began
-        homed.append(place_id)
-        return HomingResult(False, 0, 0.0, "converged", localizer.map.fingerprint(place_id))
-
     params = ActiveParams()
-    result = localize_actively(routed, Recorded(robot), "separating", params, home=stuck)
+    result = localize_actively(
+        routed, Recorded(robot), "separating", params, home=_stuck(localizer, homed)
+    )
     assert result.first.state is LocalizationState.AMBIGUOUS
     assert result.checks and not result.checks[0].started
     assert homed[0] == result.checks[0].start == office
@@ -531,3 +544,13 @@ def test_a_robot_whose_homing_to_a_checks_start_gives_up_where_it_began_steps_aw
     assert step_rad is not None and turns, "the robot must step out of where it gave up"
     assert turns[0] == (pytest.approx(step_rad), params.lost_step_m)
     assert result.distance_m == pytest.approx(robot.distance_driven_m, abs=1e-6)
+
+
+def test_a_check_that_could_not_start_is_tried_once_more_when_no_other_is_left(localizer):
+    office, routed = _office_a_routed_to_the_kitchen(localizer)
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+    homed: list[int] = []
+    result = localize_actively(routed, robot, "separating", home=_stuck(localizer, homed))
+    assert [check.start for check in result.checks] == [office, office]
+    assert not any(check.started for check in result.checks)
+    assert result.final.state is LocalizationState.AMBIGUOUS
