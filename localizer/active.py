@@ -196,7 +196,9 @@ def localize_actively(
     While the belief is ``lost`` the robot steps away and looks again (``params.lost_looks``).
     A drive shorter than ``params.min_new_view_m`` adds no frame to the belief, and a drive
     to a place also ends the drives to its counterparts at the same spot
-    (:meth:`Localizer.same_spot_places`): from there the robot has looked already.
+    (:meth:`Localizer.same_spot_places`): from there the robot has looked already. A route
+    check that could not start (its homing to the start place did not arrive) is tried once
+    more when no other check is left and the belief is still ambiguous.
     """
     chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
@@ -552,11 +554,12 @@ def matched_bearing_rad(observation: Observation, min_features: int = 5) -> floa
 def _step_away_if_stuck(
     robot: Robot, observation: Observation, began: Pose2D, params: ActiveParams
 ) -> float | None:
-    """If the robot stands less than ``params.lost_stuck_m`` from ``began`` (odometry, where it
-    took ``observation``), step ``params.lost_step_m`` towards the features ``observation``
-    verified (:func:`matched_bearing_rad`, turned back by the turns made since), or after a
-    turn of ``params.lost_turn_deg`` when too few were verified to say where. Returns the
-    distance driven (metres), or None when the robot was not stuck."""
+    """If the robot stands less than ``params.lost_stuck_m`` from ``began`` (odometry, where the
+    drive that gave up began), step ``params.lost_step_m`` towards the features
+    ``observation`` verified (:func:`matched_bearing_rad`, turned back by the turns made since
+    it was taken: its odometry, else ``began``), or after a turn of ``params.lost_turn_deg``
+    when too few were verified to say where. Returns the distance driven (metres), or None
+    when the robot was not stuck."""
     now = robot.odometry()
     if math.dist((now.x_m, now.y_m), (began.x_m, began.y_m)) >= params.lost_stuck_m:
         return None
@@ -564,7 +567,8 @@ def _step_away_if_stuck(
     if seen_rad is None:
         turn_rad = math.radians(params.lost_turn_deg)
     else:  # the bearing was taken before the homing turned the robot
-        turn_rad = seen_rad - (now.heading_rad - began.heading_rad)
+        seen_from = observation.odometry or began  # a look kept from an earlier arrival there
+        turn_rad = seen_rad - (now.heading_rad - seen_from.heading_rad)
     return _step_away(robot, math.remainder(turn_rad, math.tau), params.lost_step_m)
 
 

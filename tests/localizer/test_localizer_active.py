@@ -11,6 +11,7 @@ from robot_helpers import RobotWrapper
 from localizer.active import (
     ENDINGS,
     ActiveParams,
+    _step_away_if_stuck,
     localize_actively,
     matched_bearing_rad,
     top_two_alike,
@@ -554,3 +555,19 @@ def test_a_check_that_could_not_start_is_tried_once_more_when_no_other_is_left(l
     assert [check.start for check in result.checks] == [office, office]
     assert not any(check.started for check in result.checks)
     assert result.final.state is LocalizationState.AMBIGUOUS
+
+
+def test_a_step_out_turns_by_what_the_robot_turned_since_its_look_was_taken(localizer):
+    """A look kept from an earlier arrival at a place was taken at another heading: the step
+    towards what it matched is turned back by the turns made since, by its own odometry."""
+    robot = SimulatedRobot.kidnapped(make_world("building"), "kitchen", seed=1, camera=CAMERA)
+    look = replace(localizer.observe(robot.capture().image), odometry=Pose2D(0.0, 0.0, 0.0))
+    seen_rad = matched_bearing_rad(look)
+    assert seen_rad is not None
+    walled = WalledRobot()  # its odometry: (0, 0) facing 0; its first move bumps
+    walled.odometry = lambda: Pose2D(0.0, 0.0, np.pi / 2)  # type: ignore[method-assign]
+    params = ActiveParams()
+    stepped_m = _step_away_if_stuck(walled, look, walled.odometry(), params)
+    expected = np.remainder(seen_rad - np.pi / 2 + np.pi, 2 * np.pi) - np.pi
+    assert walled.asked[0] == (pytest.approx(expected), params.lost_step_m)
+    assert stepped_m == pytest.approx(params.lost_step_m)  # bumped at once, then the other way
