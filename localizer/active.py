@@ -566,8 +566,8 @@ def _step_away_if_stuck(
     seen_rad = matched_bearing_rad(observation)
     if seen_rad is None:
         turn_rad = math.radians(params.lost_turn_deg)
-    else:  # the bearing was taken before the homing turned the robot
-        seen_from = observation.odometry or began  # a look kept from an earlier arrival there
+    else:  # the bearing was taken before the turns since (a look kept from an earlier arrival)
+        seen_from = began if observation.odometry is None else observation.odometry
         turn_rad = seen_rad - (now.heading_rad - seen_from.heading_rad)
     return _step_away(robot, math.remainder(turn_rad, math.tau), params.lost_step_m)
 

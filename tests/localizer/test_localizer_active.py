@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -508,7 +509,7 @@ def _office_a_routed_to_the_kitchen(localizer: Localizer) -> tuple[int, Localize
     return office, _entered_from(localizer, kitchen, 0.0, room="office_a")
 
 
-def _stuck(localizer: Localizer, homed: list[int]):
+def _stuck(localizer: Localizer, homed: list[int]) -> Callable[[int], HomingResult]:
     """A homing that gives up where it began, noting the places asked for in ``homed``."""
 
     def home(place_id: int) -> HomingResult:
