@@ -4,8 +4,11 @@ Hypothesis's profile."""
 from __future__ import annotations
 
 import os
+import shutil
+from pathlib import Path
 
 import pytest
+from filelock import FileLock
 from hypothesis import settings
 
 # The property tests draw the same examples on every run ("ci", the default), so a red run is a
@@ -21,9 +24,22 @@ HEIGHT_PX = 96
 
 
 @pytest.fixture(scope="session")
-def building_map(tmp_path_factory: pytest.TempPathFactory):
+def building_map(tmp_path_factory: pytest.TempPathFactory, worker_id: str):
     """A small SIFT map of the rendered ``building`` world at 512 x 96 (spacing 1.5 m), with
-    its room graph: ``(db_path, dataset_dir)``."""
+    its room graph: ``(db_path, dataset_dir)``. Built once per run: the first xdist worker to
+    ask builds it under the run's shared temporary folder while the others wait on its lock
+    (tests only read it; a test that writes copies it first)."""
+    base = tmp_path_factory.getbasetemp()  # the run's own; under xdist, this worker's in it
+    root = (base if worker_id == "master" else base.parent) / "building"
+    with FileLock(str(root) + ".lock"):
+        if not (root / "built").exists():
+            shutil.rmtree(root, ignore_errors=True)  # a half-built one from a killed worker
+            _build_building_map(root)
+            (root / "built").touch()
+    return root / "map.db", root / "dataset"
+
+
+def _build_building_map(root: Path) -> None:
     from mapdb.build import build_map
     from mapdb.database import MapDatabase
     from mapdb.dataset import read_edges, read_manifest
@@ -33,7 +49,6 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
     from toploc.extraction import resolve_extractor
     from toploc.maps import calibrate_map
 
-    root = tmp_path_factory.mktemp("building")
     dataset = root / "dataset"
     camera = PanoramaCamera(WIDTH_PX, HEIGHT_PX)
     render_dataset(dataset, "building", spacing_m=1.5, camera=camera, progress=False)
@@ -44,7 +59,6 @@ def building_map(tmp_path_factory: pytest.TempPathFactory):
         )
         connect_known_rooms(map_db, read_edges(dataset))
     calibrate_map(db_path, "sift")  # as `toploc map build` does
-    return db_path, dataset
 
 
 @pytest.fixture
