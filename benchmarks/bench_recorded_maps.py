@@ -51,7 +51,10 @@ start was written on seed 63's trial 6 and judged on seed 71 (record seed 72), i
 measured once more on seed 69. Session 39 measured main, untouched, on world seeds 73 (K = 1,
 2, 3 and 5), 75 and 77 (record seeds one up; K = 2), then looked at seed 75's building trial
 3, seed 59's trial 2 and seed 71's every-room run for two changes it did not keep.
-World seeds 79 and up have not been looked at: the next change must be judged on them.
+Session 40 measured main, untouched, on world seeds 79 and 81 (K = 1 and 2; record seeds
+one up), and looked again at the homings of seed 75's building trial 3 and seed 71's
+every-room trials 24 and 39. World seeds 83 and up have not been looked at: the next change
+must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
