@@ -53,8 +53,9 @@ measured once more on seed 69. Session 39 measured main, untouched, on world see
 3, seed 59's trial 2 and seed 71's every-room run for two changes it did not keep.
 Session 40 measured main, untouched, on world seeds 79 and 81 (K = 1 and 2; record seeds
 one up), and looked again at the homings of seed 75's building trial 3 and seed 71's
-every-room trials 24 and 39. World seeds 83 and up have not been looked at: the next change
-must be judged on them.
+every-room trials 24 and 39, and at seed 81's house (K = 1) lost trials 0 and 5; it measured
+main on seed 83 (K = 1) as a baseline and looked at its house trial 5 (sure and wrong). World
+seeds 85 and up have not been looked at: the next change must be judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
