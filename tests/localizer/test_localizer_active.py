@@ -13,6 +13,7 @@ from localizer.active import (
     ENDINGS,
     ActiveParams,
     _step_away_if_stuck,
+    _way_in_step,
     localize_actively,
     matched_bearing_rad,
     top_two_alike,
@@ -20,7 +21,7 @@ from localizer.active import (
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
-from localizer.visual_homing import CANCELLED, HomingResult, drive_home
+from localizer.visual_homing import CANCELLED, HomingResult, StepParams, drive_home
 from mapdb.loading import load_snapshot
 from mapdb.records import Leg
 from robot.render import PanoramaCamera
@@ -478,6 +479,50 @@ def test_a_robot_localized_at_a_place_recorded_on_the_way_in_steps_further_in(lo
     assert 0.3 < stepped_m <= ActiveParams().step_in_m + 0.05
     heading = np.arctan2(after.y_m - before.y_m, after.x_m - before.x_m)
     assert abs(np.remainder(heading - way_in + np.pi, 2 * np.pi) - np.pi) < np.radians(25)
+
+
+class _DriftedOdometry(RobotWrapper):
+    """The robot standing where it stands, its odometry turned by ``turn_rad`` and shifted by
+    ``(dx_m, dy_m)``: how it reads after a long drive has drifted it."""
+
+    def __init__(self, robot: SimulatedRobot, dx_m: float, dy_m: float, turn_rad: float) -> None:
+        super().__init__(robot)
+        self.dx_m, self.dy_m, self.turn_rad = dx_m, dy_m, turn_rad
+
+    def odometry(self) -> Pose2D:
+        pose = self.robot.odometry()
+        cos, sin = np.cos(self.turn_rad), np.sin(self.turn_rad)
+        return Pose2D(
+            cos * pose.x_m - sin * pose.y_m + self.dx_m,
+            sin * pose.x_m + cos * pose.y_m + self.dy_m,
+            pose.heading_rad + self.turn_rad,
+        )
+
+
+def test_the_step_in_does_not_move_with_odometry_drifted_since_the_look_at_the_place(localizer):
+    # a route check that ends back at the place reuses the look it took there before the check
+    robot, place_id, way_in = _kitchen_way_in(localizer)
+    entered = _entered_from(localizer, place_id, way_in)
+    assert drive_home(robot, entered.map.fingerprint(place_id), entered.extract).arrived
+    look = entered.observe(robot.capture().image)
+    assert entered.update(replace(look, at_place=place_id, odometry=robot.odometry())).top[0] == (
+        "kitchen"
+    )
+
+    def step_in_seen_from_the_robot(robot) -> tuple[float, float]:
+        """The step in's end: metres from the robot, and its bearing (rad) off the heading."""
+        found = _way_in_step(entered, robot, 0.5, StepParams(), set())
+        assert found is not None
+        frame, (x_m, y_m) = found
+        here = frame.pose(robot.odometry())
+        bearing_rad = np.arctan2(y_m - here.y_m, x_m - here.x_m) - here.heading_rad
+        return float(np.hypot(x_m - here.x_m, y_m - here.y_m)), float(
+            np.remainder(bearing_rad + np.pi, 2 * np.pi) - np.pi
+        )
+
+    steady = step_in_seen_from_the_robot(robot)
+    drifted = step_in_seen_from_the_robot(_DriftedOdometry(robot, 1.0, -0.6, np.radians(40)))
+    assert drifted == pytest.approx(steady, abs=0.02)
 
 
 def test_a_place_recorded_on_a_drive_within_its_room_gives_no_step_in(localizer):
