@@ -31,6 +31,7 @@ from localizer.route_checks import (
     check_route,
     likely_twin,
     place_frame,
+    repeating_ends,
     route_to_check,
     told_outcomes,
 )
@@ -227,6 +228,10 @@ def localize_actively(
     checks: list[RouteCheck] = []
     looked_closer: set[int] = set()
     stepped_in: set[int] = set()
+
+    def room_of(place_id: int) -> str:
+        return localizer.map.place(place_id).room
+
     while True:
         if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
             looks_elsewhere += 1
@@ -278,12 +283,37 @@ def localize_actively(
                 check = route_to_check(
                     localizer, belief, observation, tried_routes - retry, checked, params.routes
                 )
+            repeating = repeating_ends(checks, localizer.lookalikes, room_of)
+            if check is None and unsure and repeating:
+                # two look-alikes' checks both arrived: their routes end alike, and routes
+                # that end elsewhere may tell, from starts whose every check ended there
+                again = {done.start for done in checks} - {
+                    done.start for done in checks if room_of(done.first_end) not in repeating
+                }
+                check = route_to_check(
+                    localizer,
+                    belief,
+                    observation,
+                    tried_routes - again,
+                    checked,
+                    params.routes,
+                    repeating,
+                )
         if check is not None:
             start, route = check
             tried_routes.add(start.id)
             rival = likely_twin(belief, start.room, localizer.lookalikes)
             notify(localizer.belief(LocalizationState.HOMING))
-            told = told_outcomes(checks, start.room)
+            repeating = repeating_ends(checks, localizer.lookalikes, room_of)
+            # a check that ended where routes end alike told nothing: one that tells may agree
+            told = told_outcomes(
+                [
+                    done
+                    for done in checks
+                    if done.afresh or room_of(done.first_end) not in repeating
+                ],
+                start.room,
+            )
             began = robot.odometry()
             done, captured, homing, homed_to = check_route(
                 localizer, robot, go, start, route, rival, params.routes, params.homing, told

@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from localizer.belief import RoomBelief
@@ -148,6 +148,12 @@ class RouteCheck:
     afresh: bool = False
     via: int | None = None
 
+    @property
+    def first_end(self) -> int:
+        """The end place of the route the check began with (``via`` if it went on from
+        there): the end :func:`route_to_check` chose."""
+        return self.end if self.via is None else self.via
+
 
 def told_outcomes(checks: Sequence[RouteCheck], room: str) -> frozenset[bool]:
     """The outcomes (:attr:`RouteCheck.confirmed`) the checks of ``room`` have told about it,
@@ -160,6 +166,28 @@ def told_outcomes(checks: Sequence[RouteCheck], room: str) -> frozenset[bool]:
         for check in checks[last + 1 :]
         if check.room == room and check.back_room == room
     )
+
+
+def repeating_ends(
+    checks: Sequence[RouteCheck],
+    lookalikes: Mapping[str, Collection[str]],
+    room_of: Callable[[int], str],
+) -> frozenset[str]:
+    """The rooms (``room_of(place_id)``) where checks of two look-alike rooms
+    (:attr:`Localizer.lookalikes`) both arrived at once since the belief last started afresh:
+    the rooms their routes ended in (:attr:`RouteCheck.first_end`). The robot stood in at most
+    one of the two, so a route from either ends alike, in rooms the map does not know as
+    look-alikes (world seed 85's house recorded one place per room: the map paired the
+    bathrooms but not the bedrooms, each bathroom's route led into the bedroom beside it, both
+    checks arrived, and the belief stayed at 0.5). A route that ends there tells nothing:
+    checks go on by routes that end elsewhere (:func:`route_to_check`'s ``avoid``)."""
+    last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
+    arrived = [check for check in checks[last + 1 :] if check.confirmed]
+    ends: set[str] = set()
+    for one, other in itertools.combinations(arrived, 2):
+        if other.room in lookalikes.get(one.room, ()):
+            ends.update(room_of(check.first_end) for check in (one, other))
+    return frozenset(ends)
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
@@ -197,24 +225,26 @@ def route_to_check(
     tried: set[int],
     checked: Mapping[str, int],
     params: RouteCheckParams,
+    avoid: Collection[str] = (),
 ) -> tuple[Place, Route] | None:
     """A place to check a likely room from, and its recorded route out of the room to a room
-    that has no look-alike. The likely rooms are taken in :func:`rooms_to_check`'s order
-    (``checked``: checks per room so far), those checked as often as each other first by a
-    route that ends in a room their look-alikes do not open onto (:func:`shared_rooms`), then
-    by any; in each, the places with a route and a heading, not tried yet, from the one the
-    latest frame matched best. None if there is none. A room whose look-alike has a shorter
-    route beyond is checked by its shortest route, into the hall too: where the pair's two
-    checks disagree, the one beyond tells, and the hall check agrees with it (76 of 77 such
-    pairs right, docs/results.md); a longer route drifts more (world seed 31's building: with
-    the legs joined, office_a's 12 m route to the kitchen arrived from office_a in 5 of 10
-    first checks; its 3 m route into the corridor, before, in 10 of the 10 that started)."""
+    that has no look-alike and is not in ``avoid``. The likely rooms are taken in
+    :func:`rooms_to_check`'s order (``checked``: checks per room so far), those checked as
+    often as each other first by a route that ends in a room their look-alikes do not open
+    onto (:func:`shared_rooms`), then by any; in each, the places with a route and a heading,
+    not tried yet, from the one the latest frame matched best. None if there is none. A room
+    whose look-alike has a shorter route beyond is checked by its shortest route, into the
+    hall too: where the pair's two checks disagree, the one beyond tells, and the hall check
+    agrees with it (76 of 77 such pairs right, docs/results.md); a longer route drifts more
+    (world seed 31's building: with the legs joined, office_a's 12 m route to the kitchen
+    arrived from office_a in 5 of 10 first checks; its 3 m route into the corridor, before,
+    in 10 of the 10 that started)."""
     counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
     graph, places = localizer.map.legs, localizer.map.places
     # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
     # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
     # bathroom_a and bedroom_a: a route between the two ends alike in both)
-    leave = {name for name, partners in localizer.lookalikes.items() if partners}
+    leave = {name for name, partners in localizer.lookalikes.items() if partners} | set(avoid)
     doors = localizer.doors
     rooms = rooms_to_check(belief, checked)
 

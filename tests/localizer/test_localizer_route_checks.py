@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from localizer.belief import RoomBelief
-from localizer.route_checks import RouteCheck, RouteCheckParams, rooms_to_check, told_outcomes
+from localizer.route_checks import (
+    RouteCheck,
+    RouteCheckParams,
+    repeating_ends,
+    rooms_to_check,
+    told_outcomes,
+)
 
 
 def test_route_check_params_refuse_route_rates_that_tell_nothing():
@@ -44,3 +50,30 @@ def test_only_likely_rooms_are_checked_by_a_route():
     rooms = ("corridor", "office_a", "office_b")
     belief = RoomBelief.from_probabilities(rooms, np.array([0.005, 0.99, 0.005]))
     assert rooms_to_check(belief, {"office_a": 1}) == ["office_a"]
+
+
+TWINS = {"bathroom_a": {"bathroom_b"}, "bathroom_b": {"bathroom_a"}}
+ROOM_OF = {3: "bathroom_a", 5: "bathroom_b", 2: "bedroom_a", 4: "bedroom_b", 1: "hall"}.__getitem__
+
+
+def routed(room: str, start: int, end: int, confirmed: bool, afresh: bool = False) -> RouteCheck:
+    return RouteCheck(room, start, end, confirmed, 10.0, back_room=room, afresh=afresh)
+
+
+def test_where_both_twins_checks_arrive_their_routes_end_alike():
+    # each bathroom's route leads into the bedroom beside it: a copy of the other wing
+    checks = [routed("bathroom_a", 3, 2, True), routed("bathroom_b", 5, 4, True)]
+    assert repeating_ends(checks, TWINS, ROOM_OF) == {"bedroom_a", "bedroom_b"}
+
+
+def test_routes_end_alike_only_where_both_twins_checks_arrived():
+    missed = [routed("bathroom_a", 3, 2, True), routed("bathroom_b", 5, 4, False)]
+    assert repeating_ends(missed, TWINS, ROOM_OF) == frozenset()
+    not_twins = [routed("bathroom_a", 3, 2, True), routed("bedroom_b", 4, 1, True)]
+    assert repeating_ends(not_twins, TWINS, ROOM_OF) == frozenset()
+
+
+def test_checks_before_the_belief_started_afresh_show_no_repeating_ends():
+    before = routed("bathroom_a", 3, 2, True)
+    lost_way = routed("bathroom_b", 5, 4, True, afresh=True)
+    assert repeating_ends([before, lost_way], TWINS, ROOM_OF) == frozenset()

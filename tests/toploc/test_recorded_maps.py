@@ -606,7 +606,8 @@ def test_a_route_into_a_room_of_one_place_does_not_settle_what_a_copied_wing_wou
     spot of an identical room, and arrives at once; back through its own views, the robot
     stands where the map has bedroom_a's place, by an odometry fixed a wing's offset off. The
     map cannot tell from one place that bathroom_a has a twin, so the arrival is one route's
-    evidence, not a retraced route's (sure of bedroom_a, 0.985, when it counted as one)."""
+    evidence, not a retraced route's (sure of bedroom_a, 0.985, when it counted as one); the
+    robot is never sure of bedroom_a, after that check nor after the checks that follow."""
     loaded = load_map(twin_wings)
     assert loaded.likelihood is not None
     assert loaded.likelihood.lookalikes == (("bedroom_a", "bedroom_b"),)
@@ -615,7 +616,10 @@ def test_a_route_into_a_room_of_one_place_does_not_settle_what_a_copied_wing_wou
     fooled = [c for c in result.checks if c.room == "bedroom_a" and c.confirmed]
     assert fooled and loaded.place(fooled[0].end).room == "bathroom_a"
     assert robot.true_room() == "bedroom_b"
-    assert result.final.state is not LocalizationState.LOCALIZED
+    beliefs = [visit.belief for visit in result.visits] + [result.final]
+    assert not any(
+        b.state is LocalizationState.LOCALIZED and b.top[0] == "bedroom_a" for b in beliefs
+    )
 
 
 def test_a_room_sure_by_its_odds_but_seen_on_little_of_the_horizon_is_settled_from_its_place(
@@ -655,3 +659,19 @@ def test_a_loop_held_back_only_by_a_one_place_room_seen_from_afar_ends_with_a_lo
     assert top_two_ratio(np.asarray(before.probabilities)) >= StateThresholds().one_place_ratio
     assert last.place_id == place
     assert result.final.top[0] == "bathroom_b" == robot.true_room()
+
+
+def test_twins_whose_checks_both_arrive_are_checked_by_routes_that_end_elsewhere(twin_wings):
+    """A robot in bedroom_a: each bedroom's route leads into the bathroom beside it, a copy of
+    the other wing's that the map does not know as one, and both checks arrive. Those routes
+    end alike and tell nothing; the robot checks again by routes into the hall, whose view
+    does not repeat where the other wing's route would end (before, it stopped there, at
+    0.5)."""
+    loaded = load_map(twin_wings)
+    robot = SimulatedRobot.kidnapped(make_world("house"), "bedroom_a", seed=2, camera=CAMERA)
+    result = localize_actively(Localizer(loaded), robot)
+    ends = [(c.room, loaded.place(c.first_end).room, c.confirmed) for c in result.checks]
+    assert ends[:2] == [("bedroom_a", "bathroom_a", True), ("bedroom_b", "bathroom_b", True)]
+    assert {room for _, room, _ in ends[2:]} == {"hall"}
+    assert result.final.top[0] == "bedroom_a" == robot.true_room()
+    assert result.final.state is LocalizationState.LOCALIZED
