@@ -54,8 +54,13 @@ measured once more on seed 69. Session 39 measured main, untouched, on world see
 Session 40 measured main, untouched, on world seeds 79 and 81 (K = 1 and 2; record seeds
 one up), and looked again at the homings of seed 75's building trial 3 and seed 71's
 every-room trials 24 and 39, and at seed 81's house (K = 1) lost trials 0 and 5; it measured
-main on seed 83 (K = 1) as a baseline and looked at its house trial 5 (sure and wrong). World
-seeds 85 and up have not been looked at: the next change must be judged on them.
+main on seed 83 (K = 1) as a baseline and looked at its house trial 5 (sure and wrong).
+Session 41 wrote its step-in frame fix on seed 83's house trial 5 and judged it on seed 85
+(record seed 86; K = 1 and 2), then wrote its checks by routes that end elsewhere on seed 85's
+house bathroom trials (K = 1; trial 2 looked at) and seed 83's, looked at seed 83's trial 1
+and seed 85's trial 0 for a change it did not keep, and judged the final code on seed 87
+(record seed 88). World seeds 89 and up have not been looked at: the next change must be
+judged on them.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
