@@ -33,6 +33,8 @@ from localizer.route_checks import (
     place_frame,
     repeating_ends,
     route_to_check,
+    starts_to_check_again,
+    telling_checks,
     told_outcomes,
 )
 from localizer.routes import DriveFrame, drive_route, route_through, way_in_rad
@@ -269,10 +271,13 @@ def localize_actively(
         check = None
         twins = top_two_alike(belief, localizer.map.rooms, localizer.lookalike_groups)
         unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
+        # rooms where routes of two look-alikes both arrived: a route that ends there tells
+        # nothing (repeating_ends)
+        repeating = repeating_ends(checks, localizer.lookalikes, room_of)
         if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
             checked = Counter(done.room for done in checks)
             check = route_to_check(
-                localizer, belief, observation, tried_routes, checked, params.routes
+                localizer, belief, observation, tried_routes, checked, params.routes, repeating
             )
             retry = {done.start for done in checks if not done.started} - retried_routes
             if check is None and unsure and retry:
@@ -281,15 +286,16 @@ def localize_actively(
                 # homings to office_b's two places gave up ended at 0.89 with drives left)
                 retried_routes.update(retry)
                 check = route_to_check(
-                    localizer, belief, observation, tried_routes - retry, checked, params.routes
+                    localizer,
+                    belief,
+                    observation,
+                    tried_routes - retry,
+                    checked,
+                    params.routes,
+                    repeating,
                 )
-            repeating = repeating_ends(checks, localizer.lookalikes, room_of)
             if check is None and unsure and repeating:
-                # two look-alikes' checks both arrived: their routes end alike, and routes
-                # that end elsewhere may tell, from starts whose every check ended there
-                again = {done.start for done in checks} - {
-                    done.start for done in checks if room_of(done.first_end) not in repeating
-                }
+                again = starts_to_check_again(checks, repeating, room_of)
                 check = route_to_check(
                     localizer,
                     belief,
@@ -304,16 +310,7 @@ def localize_actively(
             tried_routes.add(start.id)
             rival = likely_twin(belief, start.room, localizer.lookalikes)
             notify(localizer.belief(LocalizationState.HOMING))
-            repeating = repeating_ends(checks, localizer.lookalikes, room_of)
-            # a check that ended where routes end alike told nothing: one that tells may agree
-            told = told_outcomes(
-                [
-                    done
-                    for done in checks
-                    if done.afresh or room_of(done.first_end) not in repeating
-                ],
-                start.room,
-            )
+            told = told_outcomes(telling_checks(checks, repeating, room_of), start.room)
             began = robot.odometry()
             done, captured, homing, homed_to = check_route(
                 localizer, robot, go, start, route, rival, params.routes, params.homing, told
@@ -347,7 +344,8 @@ def localize_actively(
                 localizer, robot, params.step_in_m, params.homing.step, stepped_in
             )
             if step_in is not None:
-                frame, inside = step_in
+                frame, inside, captured = step_in
+                frames += captured
                 looked_closer.update(stepped_in)  # its room is looked at: do not home back
                 notify(localizer.belief(LocalizationState.HOMING))
                 here = frame.pose(robot.odometry())
@@ -466,7 +464,7 @@ def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
 
 def _way_in_step(
     localizer: Localizer, robot: Robot, step_m: float, step: StepParams, stepped: set[int]
-) -> tuple[DriveFrame, tuple[float, float]] | None:
+) -> tuple[DriveFrame, tuple[float, float], int] | None:
     """Where to drive further into the room the belief is ``localized`` in, when the latest
     frame was taken at a place of that room recorded on a drive in from another room
     (:attr:`ActiveParams.step_in_m`): the point ``step_m`` past the place along the way the
@@ -479,13 +477,13 @@ def _way_in_step(
     stands: the latest frame's if the robot has not moved since (odometry), else a new capture
     (a route check that ends back at the place reuses the look taken there before it, and its
     odometry has drifted since: on world seed 83's house, one place per room, 20 m of route
-    later it put the robot 1.3 m and 44° off, and the step in drove out into the hall).
-    None when there is no such place, it is in ``stepped`` (added to it: once per place), or
-    the frame does not match its view."""
+    later it put the robot about 2 m and 44° off, and the step in drove out into the hall);
+    with the captures made for it (0 or 1). None when there is no such place, it is in
+    ``stepped`` (added to it: once per place), or the frame does not match its view."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
-    if latest.at_place is None or latest.at_place in stepped or latest.odometry is None:
+    if latest.at_place is None or latest.at_place in stepped:
         return None
     place = localizer.map.place(latest.at_place)
     if place.room != belief.top[0] or place.leg is None:
@@ -498,17 +496,17 @@ def _way_in_step(
     bearing_rad = way_in_rad(place, start)
     if bearing_rad is None:
         return None
-    view, now = latest.fingerprint, robot.odometry()
-    if now != latest.odometry:
-        view = localizer.extract(robot.capture().image)
-    frame = place_frame(localizer, place.id, view, now, step)
+    view, odometry_now, captured = latest.fingerprint, robot.odometry(), 0
+    if odometry_now != latest.odometry:
+        view, captured = localizer.extract(robot.capture().image), 1
+    frame = place_frame(localizer, place.id, view, odometry_now, step)
     if frame is None:
         return None
     inside = (
         frame.at.x_m + step_m * math.cos(bearing_rad),
         frame.at.y_m + step_m * math.sin(bearing_rad),
     )
-    return frame, inside
+    return frame, inside, captured
 
 
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:

@@ -176,18 +176,51 @@ def repeating_ends(
     """The rooms (``room_of(place_id)``) where checks of two look-alike rooms
     (:attr:`Localizer.lookalikes`) both arrived at once since the belief last started afresh:
     the rooms their routes ended in (:attr:`RouteCheck.first_end`). The robot stood in at most
-    one of the two, so a route from either ends alike, in rooms the map does not know as
-    look-alikes (world seed 85's house recorded one place per room: the map paired the
-    bathrooms but not the bedrooms, each bathroom's route led into the bedroom beside it, both
-    checks arrived, and the belief stayed at 0.5). A route that ends there tells nothing:
-    checks go on by routes that end elsewhere (:func:`route_to_check`'s ``avoid``)."""
+    one of the two rooms, so one of the two arrivals was false: the route from the other room
+    ends where the first one's does, in a room the map does not know as a look-alike (world
+    seed 85's house recorded one place per room: the map paired the bathrooms but not the
+    bedrooms, each bathroom's route led into the bedroom beside it, both checks arrived, and
+    the belief stayed at 0.5). A pair is taken in the order the checks were made, and one whose
+    end is already among the rooms found is explained by them: a later check that arrived by
+    a route ending elsewhere does not make its end repeat. Checks go on by routes that end
+    elsewhere (:func:`route_to_check`'s ``avoid``), and an arrival there tells nothing
+    (:func:`telling_checks`)."""
     last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
     arrived = [check for check in checks[last + 1 :] if check.confirmed]
     ends: set[str] = set()
     for one, other in itertools.combinations(arrived, 2):
-        if other.room in lookalikes.get(one.room, ()):
-            ends.update(room_of(check.first_end) for check in (one, other))
+        pair = {room_of(one.first_end), room_of(other.first_end)}
+        if other.room in lookalikes.get(one.room, ()) and not pair & ends:
+            ends |= pair
     return frozenset(ends)
+
+
+def telling_checks(
+    checks: Sequence[RouteCheck], repeating: Collection[str], room_of: Callable[[int], str]
+) -> list[RouteCheck]:
+    """``checks`` without the arrivals at a room of ``repeating`` (:func:`repeating_ends`),
+    which told nothing; what :func:`told_outcomes` reads for the next check of a room, so that
+    a telling arrival is counted once though a check of the room arrived there before. A miss
+    there is kept (the room's other checks may miss by the same cause), and so is a check
+    after which the belief started afresh (it marks where the told outcomes start)."""
+    return [
+        check
+        for check in checks
+        if check.afresh or not (check.confirmed and room_of(check.first_end) in repeating)
+    ]
+
+
+def starts_to_check_again(
+    checks: Sequence[RouteCheck], repeating: Collection[str], room_of: Callable[[int], str]
+) -> set[int]:
+    """The start places of ``checks`` all of whose checks ended (:attr:`RouteCheck.first_end`)
+    in a room of ``repeating``: a route from there that ends elsewhere may still tell."""
+    starts = {check.start for check in checks}
+    return {
+        start
+        for start in starts
+        if all(room_of(c.first_end) in repeating for c in checks if c.start == start)
+    }
 
 
 def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
@@ -228,7 +261,9 @@ def route_to_check(
     avoid: Collection[str] = (),
 ) -> tuple[Place, Route] | None:
     """A place to check a likely room from, and its recorded route out of the room to a room
-    that has no look-alike and is not in ``avoid``. The likely rooms are taken in
+    that has no look-alike and is not in ``avoid`` (room names; the route's first leg: a check
+    that goes on beyond a hall, :func:`check_route`, is not held to it). The likely rooms are
+    taken in
     :func:`rooms_to_check`'s order (``checked``: checks per room so far), those checked as
     often as each other first by a route that ends in a room their look-alikes do not open
     onto (:func:`shared_rooms`), then by any; in each, the places with a route and a heading,

@@ -20,7 +20,7 @@ from localizer.active import (
 )
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.localizer import LoadedMap, Localizer
-from localizer.robot_protocol import Capture, MoveResult, Pose2D
+from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import CANCELLED, HomingResult, StepParams, drive_home
 from mapdb.loading import load_snapshot
 from mapdb.records import Leg
@@ -509,19 +509,19 @@ def test_the_step_in_does_not_move_with_odometry_drifted_since_the_look_at_the_p
         "kitchen"
     )
 
-    def step_in_seen_from_the_robot(robot) -> tuple[float, float]:
+    def step_in_seen_by(seen_by: Robot) -> tuple[float, float]:
         """The step in's end: metres from the robot, and its bearing (rad) off the heading."""
-        found = _way_in_step(entered, robot, 0.5, StepParams(), set())
+        found = _way_in_step(entered, seen_by, 0.5, StepParams(), set())
         assert found is not None
-        frame, (x_m, y_m) = found
-        here = frame.pose(robot.odometry())
+        frame, (x_m, y_m), _ = found
+        here = frame.pose(seen_by.odometry())
         bearing_rad = np.arctan2(y_m - here.y_m, x_m - here.x_m) - here.heading_rad
         return float(np.hypot(x_m - here.x_m, y_m - here.y_m)), float(
             np.remainder(bearing_rad + np.pi, 2 * np.pi) - np.pi
         )
 
-    steady = step_in_seen_from_the_robot(robot)
-    drifted = step_in_seen_from_the_robot(_DriftedOdometry(robot, 1.0, -0.6, np.radians(40)))
+    steady = step_in_seen_by(robot)
+    drifted = step_in_seen_by(_DriftedOdometry(robot, 1.0, -0.6, np.radians(40)))
     assert drifted == pytest.approx(steady, abs=0.02)
 
 

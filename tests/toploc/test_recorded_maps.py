@@ -620,6 +620,7 @@ def test_a_route_into_a_room_of_one_place_does_not_settle_what_a_copied_wing_wou
     assert not any(
         b.state is LocalizationState.LOCALIZED and b.top[0] == "bedroom_a" for b in beliefs
     )
+    assert result.final.top[0] == "bedroom_b"
 
 
 def test_a_room_sure_by_its_odds_but_seen_on_little_of_the_horizon_is_settled_from_its_place(
