@@ -8,7 +8,7 @@ that a drive publishes progress and can be cancelled).
 
 When the policy has no place left that tells the likely rooms apart (look-alike rooms that
 look alike from every place of theirs), the robot checks a likely room by a recorded route
-(:mod:`localizer.route_checks`).
+(:mod:`localizer.route_choice` picks it, :mod:`localizer.route_checks` drives it).
 """
 
 from __future__ import annotations
@@ -18,31 +18,27 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from localizer.belief import LocalizationState, RoomBelief
+from localizer.last_looks import closer_look, place_to_end_at, way_in_step
 from localizer.likelihood import PlaceScore
 from localizer.localizer import Localizer, Observation
+from localizer.looking_elsewhere import faintly_seen, step_away_if_stuck
 from localizer.policy import Policy, PolicyContext, make_policy
 from localizer.robot_protocol import Pose2D, Robot
-from localizer.route_checks import (
-    RouteCheck,
-    RouteCheckParams,
-    check_route,
+from localizer.route_checks import RouteCheck, RouteCheckParams, check_route
+from localizer.route_choice import (
     likely_twin,
-    place_frame,
     repeating_ends,
     route_to_check,
     starts_to_check_again,
     telling_checks,
     told_outcomes,
 )
-from localizer.routes import DriveFrame, drive_route, route_through, way_in_rad
+from localizer.routes import drive_route, route_through
 from localizer.visual_homing import (
     CANCELLED,
     HomingParams,
     HomingResult,
-    StepParams,
     drive_home,
 )
 from mapdb.records import Place
@@ -74,32 +70,34 @@ class ActiveParams:
     world seed 24's house, two places per room, 4 of 5 kidnappings into one bedroom ended
     ``lost`` after two steps away, and none when homing there). Where that homing ends less
     than ``lost_stuck_m`` from where it began (odometry), or no place was matched, the robot
-    steps towards the features the look verified with any place (:func:`matched_bearing_rad`:
-    in a room's corner they lie across the room), or turns by ``lost_turn_deg`` first when
-    too few were verified to say where; a step that bumps at once is driven the other way.
-    A route check whose homing to its start place gives up that close to where it began,
-    the robot at no place, is followed by the same step (:func:`_step_away_if_stuck`).
+    steps towards the features the look verified with any place
+    (:func:`~localizer.looking_elsewhere.matched_bearing_rad`: in a room's corner they lie
+    across the room), or turns by ``lost_turn_deg`` first when too few were verified to say
+    where; a step that bumps at once is driven the other way. A route check whose homing to
+    its start place gives up that close to where it began, the robot at no place, is followed
+    by the same step (:func:`~localizer.looking_elsewhere.step_away_if_stuck`).
     ``min_new_view_m``: a drive shorter than this (odometric) ends where the robot already
     looked, and its frame is not folded into the belief again: the same view twice is one
     piece of evidence, not two (homing to a counterpart at the spot the robot stands on
     drives nowhere, and its frame repeated the last one's counts to the inlier).
     ``end_at_place``: a belief ``localized`` on a frame not taken where the robot homed to a
     place of its room is not the end: the robot homes to that room's place the frame matched
-    best and looks there (:func:`_place_to_end_at`), so the loop ends at a stored place of the
-    room it names. A robot set down in a doorway sees both rooms, and a place recorded near
-    the door may make the next room's the better view: on the recorded maps of world seeds
-    35-57 (960 single looks kidnapped into every room), 11 of the 379 ``localized`` looks were
-    wrong, 10 of them by robots whose centre stood 0.15-0.42 m from a door's centre, on the
-    side of the room they did not name; run whole, 6 ended sure and wrong, none with this
-    homing, which takes the robot through that door into the room it names.
+    best and looks there (:func:`~localizer.last_looks.place_to_end_at`), so the loop ends at
+    a stored place of the room it names. A robot set down in a doorway sees both rooms, and a
+    place recorded near the door may make the next room's the better view: on the recorded
+    maps of world seeds 35-57 (960 single looks kidnapped into every room), 11 of the 379
+    ``localized`` looks were wrong, 10 of them by robots whose centre stood 0.15-0.42 m from a
+    door's centre, on the side of the room they did not name; run whole, 6 ended sure and
+    wrong, none with this homing, which takes the robot through that door into the room it
+    names.
     ``step_in_m``: a belief ``localized`` on a frame taken at a place of its room recorded on
     a drive in from another room (the first place after a door, where a user records as soon
     as the robot is through it) is looked at once more from the point ``step_in_m`` past the
     place along the way the drive came in, driven to from where homing left the robot
-    (:func:`_way_in_step`): homing arrives within about 0.3 m of a place, and by a door that
-    may be the far side of it (world seed 59's house recorded one place per room: a robot
-    homed to bedroom_a's place, recorded about 0.2 m inside by the door, said bedroom_a at
-    0.962 standing 1 cm into the hall). 0 turns it off.
+    (:func:`~localizer.last_looks.way_in_step`): homing arrives within about 0.3 m of a place,
+    and by a door that may be the far side of it (world seed 59's house recorded one place per
+    room: a robot homed to bedroom_a's place, recorded about 0.2 m inside by the door, said
+    bedroom_a at 0.962 standing 1 cm into the hall). 0 turns it off.
     ``routes``: how a room is checked by a recorded route (:class:`RouteCheckParams`)."""
 
     max_targets: int = 4
@@ -237,7 +235,7 @@ def localize_actively(
     while True:
         if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
             looks_elsewhere += 1
-            faint = _faintly_seen(observation, params.lost_home_min_inliers, homed_lost)
+            faint = faintly_seen(observation, params.lost_home_min_inliers, homed_lost)
             began, at_place = robot.odometry(), None
             if faint is not None:  # the place it matched best, though too weakly to tell
                 homed_lost.add(faint)
@@ -248,7 +246,7 @@ def localize_actively(
                     ended = CANCELLED
                     break
                 at_place = faint
-            stepped_m = _step_away_if_stuck(robot, observation, began, params)
+            stepped_m = _step_out(robot, observation, began, params)
             if stepped_m is not None:
                 distance += stepped_m
                 at_place = None
@@ -319,7 +317,7 @@ def localize_actively(
                 # the homing to the check's start gave up where it began: out of that corner
                 # before the next check (world seed 63's building, two places per room: a
                 # robot woken between a cabinet and the wall spent its four checks there)
-                distance += _step_away_if_stuck(robot, observation, began, params) or 0.0
+                distance += _step_out(robot, observation, began, params) or 0.0
             localizer.predict(HOMING_STAY_PROBABILITY)
             observation, looked = _look_again(localizer, robot, homed_to)
             distance += done.distance_m
@@ -334,13 +332,13 @@ def localize_actively(
                 break
             continue
         if target is None:
-            target = _closer_look(localizer, looked_closer)
+            target = closer_look(localizer, looked_closer)
             if target is None and params.end_at_place and spent < params.max_targets:
-                target = _place_to_end_at(localizer, looked_closer)
+                target = place_to_end_at(localizer, looked_closer)
             if target is not None:
                 looked_closer.add(target)
         if target is None and params.step_in_m > 0:
-            step_in = _way_in_step(
+            step_in = way_in_step(
                 localizer, robot, params.step_in_m, params.homing.step, stepped_in
             )
             if step_in is not None:
@@ -423,92 +421,6 @@ def _look_again(
     return observation, 1
 
 
-def _closer_look(localizer: Localizer, looked: set[int]) -> int | None:
-    """A place of the room the belief would settle on but for not seeing that room all round
-    (:meth:`Localizer.unseen_room`), the first the robot has not homed to for this yet: the
-    loop homes there and looks before it ends. Looking where the room's place stands asks
-    what the all-round test asks, whether the robot is in that room and not at its door; the
-    odds come from what came before (on world seeds 43 and 45's house recorded one place per
-    room, 8 robots ended ambiguous at 36-49 times their room's twin, after their room's check
-    arrived and the twin's missed, looking from the twin's place's spot in their own room,
-    where their room's place covered less of the horizon; all 8 were right)."""
-    room = localizer.unseen_room()
-    if room is None:
-        return None
-    places = [place.id for place in localizer.map.places if place.room == room]
-    return next((place_id for place_id in places if place_id not in looked), None)
-
-
-def _place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
-    """The place to home to before a ``localized`` belief is taken
-    (:attr:`ActiveParams.end_at_place`): of the belief's room, the place the latest frame
-    verified with most spread inliers; None when the belief is not ``localized``, the latest
-    frame was taken where the robot homed to a place of that room (or to its counterpart on
-    one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of its places for a
-    closer look already (``looked``: once per room, even where that homing did not move it),
-    or the frame verified no place of it."""
-    belief, latest = localizer.belief(), localizer.latest
-    if belief.state is not LocalizationState.LOCALIZED or latest is None:
-        return None
-    room = belief.top[0]
-    homed = {localizer.map.place(place_id).room for place_id in looked}
-    if latest.at_place is not None:  # its counterparts on that spot were looked from too
-        for place_id in (latest.at_place, *localizer.same_spot_places(latest.at_place)):
-            homed.add(localizer.map.place(place_id).room)
-    if room in homed:
-        return None
-    return _best_matched(
-        [item for item in latest.evidence.places if item.room == room and item.inliers > 0]
-    )
-
-
-def _way_in_step(
-    localizer: Localizer, robot: Robot, step_m: float, step: StepParams, stepped: set[int]
-) -> tuple[DriveFrame, tuple[float, float], int] | None:
-    """Where to drive further into the room the belief is ``localized`` in, when the latest
-    frame was taken at a place of that room recorded on a drive in from another room
-    (:attr:`ActiveParams.step_in_m`): the point ``step_m`` past the place along the way the
-    drive came in (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it
-    in, fixed by the robot standing at the place when it took that frame, its heading by the
-    frame's rotation against the place's stored view
-    (:func:`~localizer.route_checks.place_frame`, as a route check fixes its frame at a
-    place). Driven as a route (a step that bumps slides past: a robot homed into a doorway off
-    its middle meets the door frame). The frame is fixed on a view taken where the robot
-    stands: the latest frame's if the robot has not moved since (odometry), else a new capture
-    (a route check that ends back at the place reuses the look taken there before it, and its
-    odometry has drifted since: on world seed 83's house, one place per room, 20 m of route
-    later it put the robot about 2 m and 44° off, and the step in drove out into the hall);
-    with the captures made for it (0 or 1). None when there is no such place, it is in
-    ``stepped`` (added to it: once per place), or the frame does not match its view."""
-    belief, latest = localizer.belief(), localizer.latest
-    if belief.state is not LocalizationState.LOCALIZED or latest is None:
-        return None
-    if latest.at_place is None or latest.at_place in stepped:
-        return None
-    place = localizer.map.place(latest.at_place)
-    if place.room != belief.top[0] or place.leg is None:
-        return None
-    stepped.add(place.id)
-    try:
-        start = localizer.map.place(place.leg.from_place)
-    except KeyError:  # the leg's start place was removed from the map since
-        return None
-    bearing_rad = way_in_rad(place, start)
-    if bearing_rad is None:
-        return None
-    view, odometry_now, captured = latest.fingerprint, robot.odometry(), 0
-    if odometry_now != latest.odometry:
-        view, captured = localizer.extract(robot.capture().image), 1
-    frame = place_frame(localizer, place.id, view, odometry_now, step)
-    if frame is None:
-        return None
-    inside = (
-        frame.at.x_m + step_m * math.cos(bearing_rad),
-        frame.at.y_m + step_m * math.sin(bearing_rad),
-    )
-    return frame, inside, captured
-
-
 def _drives_spent(visits: Sequence[Visit], max_targets: int) -> int:
     """The drives of ``visits`` that count against ``max_targets``: those that told something.
     Drives that told nothing (a check whose homing to its start place did not arrive, a drive
@@ -565,79 +477,14 @@ def _to_confirm(
     return belief.state is LocalizationState.LOCALIZED or homed_there
 
 
-def matched_bearing_rad(observation: Observation, min_features: int = 5) -> float | None:
-    """The robot-frame bearing (radians, CCW from the heading) of the mean direction of the
-    query's features that ``observation`` verified with any place; None when fewer than
-    ``min_features`` were verified, or when they surround the robot so evenly that their mean
-    direction is shorter than 0.1.
-
-    A robot woken in a corner, facing walls it matches nothing on, matches what lies across
-    the room: the two robots that ended ``lost`` 0.4-0.6 m from a bedroom's back wall on world
-    seed 47's recorded house matched 21 and 41 features, and their mean bearing pointed within
-    6° and 1° of the room's middle."""
-    verified = [
-        item.inlier_pairs[:, 0] for item in observation.evidence.places if len(item.inlier_pairs)
-    ]
-    if not verified:
-        return None
-    bearings_rad = observation.fingerprint.bearings_rad[np.unique(np.concatenate(verified))]
-    if len(bearings_rad) < min_features:
-        return None
-    mean = np.array([np.cos(bearings_rad).mean(), np.sin(bearings_rad).mean()])
-    if np.hypot(*mean) < 0.1:
-        return None
-    return float(np.arctan2(mean[1], mean[0]))
-
-
-def _step_away_if_stuck(
+def _step_out(
     robot: Robot, observation: Observation, began: Pose2D, params: ActiveParams
 ) -> float | None:
-    """If the robot stands less than ``params.lost_stuck_m`` from ``began`` (odometry, where the
-    drive that gave up began), step ``params.lost_step_m`` towards the features
-    ``observation`` verified (:func:`matched_bearing_rad`, turned back by the turns made since
-    it was taken: its odometry, else ``began``), or after a turn of ``params.lost_turn_deg``
-    when too few were verified to say where. Returns the distance driven (metres), or None
-    when the robot was not stuck."""
-    now = robot.odometry()
-    if math.dist((now.x_m, now.y_m), (began.x_m, began.y_m)) >= params.lost_stuck_m:
-        return None
-    seen_rad = matched_bearing_rad(observation)
-    if seen_rad is None:
-        turn_rad = math.radians(params.lost_turn_deg)
-    else:  # the bearing was taken before the turns since (a look kept from an earlier arrival)
-        seen_from = began if observation.odometry is None else observation.odometry
-        turn_rad = seen_rad - (now.heading_rad - seen_from.heading_rad)
-    return _step_away(robot, math.remainder(turn_rad, math.tau), params.lost_step_m)
-
-
-def _step_away(robot: Robot, turn_rad: float, step_m: float) -> float:
-    """Turn by ``turn_rad`` and drive ``step_m``; a step that bumps before half of it is
-    driven the other way (turned round). Returns the distance driven (metres)."""
-    moved = robot.move(turn_rad, step_m)
-    driven = abs(moved.moved_m)
-    if moved.bumped and driven < step_m / 2:
-        driven += abs(robot.move(math.pi, step_m).moved_m)
-    return driven
-
-
-def _faintly_seen(observation: Observation, min_inliers: int, tried: set[int]) -> int | None:
-    """The place ``observation`` matched best (most spread inliers) among those with at least
-    ``min_inliers`` verified inliers and not in ``tried``; None if there is none."""
-    return _best_matched(
-        [
-            item
-            for item in observation.evidence.places
-            if item.inliers >= min_inliers and item.place_id not in tried
-        ]
+    """:func:`~localizer.looking_elsewhere.step_away_if_stuck` with ``params``' lost-look
+    settings: the metres stepped, or None when the robot was not stuck."""
+    return step_away_if_stuck(
+        robot, observation, began, params.lost_stuck_m, params.lost_step_m, params.lost_turn_deg
     )
-
-
-def _best_matched(items: Sequence[PlaceScore]) -> int | None:
-    """The id of the place of ``items`` with most spread inliers (ties: the lower id); None
-    for no items."""
-    if not items:
-        return None
-    return max(items, key=lambda item: (item.spread_inliers, -item.place_id)).place_id
 
 
 def _may_drive(belief: RoomBelief, drives: int, max_targets: int) -> bool:

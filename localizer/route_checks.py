@@ -19,41 +19,36 @@ instead: the room whose place it then reaches at once gains the odds.
 
 from __future__ import annotations
 
-import functools
-import itertools
 import math
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from localizer.belief import RoomBelief
-from localizer.localizer import Localizer, Observation
+from localizer.localizer import Localizer
 from localizer.robot_protocol import Pose2D, Robot
+from localizer.route_frames import (
+    Mark,
+    back_by_marks,
+    frame_by_view,
+    joined_route,
+    known_frame,
+    onward_route,
+    way_back_route,
+)
 from localizer.routes import (
     ROUTE_MAX_M,
     DriveFrame,
     Route,
     drive_route,
     route_beyond,
-    route_into,
-    route_out,
-    route_through,
     shared_rooms,
 )
 from localizer.turn_compass import CompassedRobot
 from localizer.visual_homing import (
     CANCELLED,
-    HomingError,
     HomingParams,
     HomingResult,
-    StepParams,
-    drive_home,
-    matched_inliers,
 )
-from mapdb.records import Fingerprint, Place
-
-LIKELY_SHARE = 0.1
-"""A room at least this share of the top room's probability is checked by a route too (a
-refuted look-alike tells as much as a confirmed top room)."""
+from mapdb.records import Place
 
 
 @dataclass(frozen=True)
@@ -134,7 +129,7 @@ class RouteCheck:
     the robot did not get back to a place it knew, and the belief started afresh (what earlier
     checks told is gone with it); ``via``: the place of a room ``room`` opens onto that the
     route reached at once and went on from to ``end`` (None: it went straight to ``end``;
-    :func:`_onward`)."""
+    :func:`~localizer.route_frames.onward_route`)."""
 
     room: str
     start: int
@@ -151,171 +146,8 @@ class RouteCheck:
     @property
     def first_end(self) -> int:
         """The end place of the route the check began with (``via`` if it went on from
-        there): the end :func:`route_to_check` chose."""
+        there): the end :func:`~localizer.route_choice.route_to_check` chose."""
         return self.end if self.via is None else self.via
-
-
-def told_outcomes(checks: Sequence[RouteCheck], room: str) -> frozenset[bool]:
-    """The outcomes (:attr:`RouteCheck.confirmed`) the checks of ``room`` have told about it,
-    folded in or already known: of the checks that came back to ``room``, since the belief
-    last started afresh (:attr:`RouteCheck.afresh`: what a check told before then was about a
-    belief that is gone, and a later check that comes out the same tells it again)."""
-    last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
-    return frozenset(
-        check.confirmed
-        for check in checks[last + 1 :]
-        if check.room == room and check.back_room == room
-    )
-
-
-def repeating_ends(
-    checks: Sequence[RouteCheck],
-    lookalikes: Mapping[str, Collection[str]],
-    room_of: Callable[[int], str],
-) -> frozenset[str]:
-    """The rooms (``room_of(place_id)``) where checks of two look-alike rooms
-    (:attr:`Localizer.lookalikes`) both arrived at once since the belief last started afresh:
-    the rooms their routes ended in (:attr:`RouteCheck.first_end`). The robot stood in at most
-    one of the two rooms, so one of the two arrivals was false: the route from the other room
-    ends where the first one's does, in a room the map does not know as a look-alike (world
-    seed 85's house recorded one place per room: the map paired the bathrooms but not the
-    bedrooms, each bathroom's route led into the bedroom beside it, both checks arrived, and
-    the belief stayed at 0.5). A pair is taken in the order the checks were made, and one whose
-    end is already among the rooms found is explained by them: a later check that arrived by
-    a route ending elsewhere does not make its end repeat. Checks go on by routes that end
-    elsewhere (:func:`route_to_check`'s ``avoid``), and an arrival there tells nothing
-    (:func:`telling_checks`)."""
-    last = max((i for i, check in enumerate(checks) if check.afresh), default=-1)
-    arrived = [check for check in checks[last + 1 :] if check.confirmed]
-    ends: set[str] = set()
-    for one, other in itertools.combinations(arrived, 2):
-        pair = {room_of(one.first_end), room_of(other.first_end)}
-        if other.room in lookalikes.get(one.room, ()) and not pair & ends:
-            ends |= pair
-    return frozenset(ends)
-
-
-def telling_checks(
-    checks: Sequence[RouteCheck], repeating: Collection[str], room_of: Callable[[int], str]
-) -> list[RouteCheck]:
-    """``checks`` without the arrivals at a room of ``repeating`` (:func:`repeating_ends`),
-    which told nothing; what :func:`told_outcomes` reads for the next check of a room, so that
-    a telling arrival is counted once though a check of the room arrived there before. A miss
-    there is kept (the room's other checks may miss by the same cause), and so is a check
-    after which the belief started afresh (it marks where the told outcomes start)."""
-    return [
-        check
-        for check in checks
-        if check.afresh or not (check.confirmed and room_of(check.first_end) in repeating)
-    ]
-
-
-def starts_to_check_again(
-    checks: Sequence[RouteCheck], repeating: Collection[str], room_of: Callable[[int], str]
-) -> set[int]:
-    """The start places of ``checks`` all of whose checks ended (:attr:`RouteCheck.first_end`)
-    in a room of ``repeating``: a route from there that ends elsewhere may still tell."""
-    starts = {check.start for check in checks}
-    return {
-        start
-        for start in starts
-        if all(room_of(c.first_end) in repeating for c in checks if c.start == start)
-    }
-
-
-def rooms_to_check(belief: RoomBelief, checked: Mapping[str, int]) -> list[str]:
-    """The likely rooms (at least :data:`LIKELY_SHARE` of the top room's probability) in the
-    order to check them by a route: the rooms checked fewer times (``checked``, by room) first,
-    then the more likely. A room's checks share their end place and its view, and fail or pass
-    together: a check that arrived is followed by its rival's, not by the same room's again
-    (world seed 27's house, two places per room: the twin bedrooms open onto one hall whose
-    doors repeat every 6.6 m, and a robot in bedroom_b drove bedroom_a's two routes to the same
-    hall place, arrived both times and ended sure of bedroom_a, 0.985, in 4 of 5 kidnappings;
-    the rival's check, where its room has a route, can tell the other way). Likewise after a
-    check that did not arrive (on world seed 14, each of the 10 robots in office_b spent its
-    first two of four drives on office_a's routes)."""
-    top_p = belief.top[1]
-    likely = [(room, p) for room, p in belief.ranked() if p >= LIKELY_SHARE * top_p]
-    return [room for room, _ in sorted(likely, key=lambda rp: checked.get(rp[0], 0))]
-
-
-def likely_twin(
-    belief: RoomBelief, room: str, lookalikes: Mapping[str, frozenset[str]]
-) -> str | None:
-    """The most likely of ``room``'s look-alikes (at least :data:`LIKELY_SHARE` of the top
-    room's probability), or None."""
-    twins = lookalikes.get(room, frozenset())
-    top_p = belief.top[1]
-    return next(
-        (name for name, p in belief.ranked() if name in twins and p >= LIKELY_SHARE * top_p), None
-    )
-
-
-def route_to_check(
-    localizer: Localizer,
-    belief: RoomBelief,
-    observation: Observation,
-    tried: set[int],
-    checked: Mapping[str, int],
-    params: RouteCheckParams,
-    avoid: Collection[str] = (),
-) -> tuple[Place, Route] | None:
-    """A place to check a likely room from, and its recorded route out of the room to a room
-    that has no look-alike and is not in ``avoid`` (room names; the route's first leg: a check
-    that goes on beyond a hall, :func:`check_route`, is not held to it). The likely rooms are
-    taken in
-    :func:`rooms_to_check`'s order (``checked``: checks per room so far), those checked as
-    often as each other first by a route that ends in a room their look-alikes do not open
-    onto (:func:`shared_rooms`), then by any; in each, the places with a route and a heading,
-    not tried yet, from the one the latest frame matched best. None if there is none. A room
-    whose look-alike has a shorter route beyond is checked by its shortest route, into the
-    hall too: where the pair's two checks disagree, the one beyond tells, and the hall check
-    agrees with it (76 of 77 such pairs right, docs/results.md); a longer route drifts more
-    (world seed 31's building: with the legs joined, office_a's 12 m route to the kitchen
-    arrived from office_a in 5 of 10 first checks; its 3 m route into the corridor, before,
-    in 10 of the 10 that started)."""
-    counts = {item.place_id: item.spread_inliers for item in observation.evidence.places}
-    graph, places = localizer.map.legs, localizer.map.places
-    # a route into a look-alike room ends at its twin's spot in the twin's twin: it must end
-    # in a room that has none (in the house, bathroom_b and bedroom_b are a copy of the pair
-    # bathroom_a and bedroom_a: a route between the two ends alike in both)
-    leave = {name for name, partners in localizer.lookalikes.items() if partners} | set(avoid)
-    doors = localizer.doors
-    rooms = rooms_to_check(belief, checked)
-
-    @functools.cache
-    def beyond_m(room: str) -> float:
-        route = route_beyond(graph, places, room, localizer.lookalikes, doors, params.route_max_m)
-        return math.inf if route is None else route.length_m
-
-    for _, tier in itertools.groupby(rooms, key=lambda room: checked.get(room, 0)):
-        starts = {
-            room: sorted(
-                (
-                    place
-                    for place in places
-                    if place.room == room
-                    and place.id in graph
-                    and place.heading_deg is not None
-                    and place.id not in tried
-                ),
-                key=lambda q: (-counts.get(q.id, 0.0), q.id),
-            )
-            for room in tier
-        }
-        for strict in (True, False):
-            for room, room_starts in starts.items():
-                leave_room = leave | {room}
-                if strict:
-                    twins = localizer.lookalikes.get(room, frozenset())
-                    if any(beyond_m(twin) < beyond_m(room) for twin in twins):
-                        continue  # the twin's route beyond tells for the pair: any route here
-                    leave_room |= shared_rooms(doors, room, twins)
-                for place in room_starts:
-                    route = route_out(graph, places, place.id, leave_room, params.route_max_m)
-                    if route is not None:
-                        return place, route
-    return None
 
 
 def check_route(
@@ -339,14 +171,15 @@ def check_route(
     made a robot in the room sure of its twin (world seed 25's house, two places per room: two
     checks of the bedroom the robot was in failed, 0.54 for it became 0.034); two arrivals
     made a robot sure of the twin it was not in (world seed 27's house, see
-    :func:`rooms_to_check`). The way back: if homing to the route's end
+    :func:`~localizer.route_choice.rooms_to_check`). The way back: if homing to the route's end
     place arrived but not at once, by a recorded route from there into ``rival`` (``start``'s
     likely look-alike, if any); otherwise back along the views taken on the way out, to
     ``start``, where a check that arrived at once is folded in again if the robot stands where
     the map has ``start`` (:func:`_retraced`). A check whose homing to ``start`` does not
     arrive drives no route: the robot homes back to the place it stood at, if it stood at one.
     A route that ends in a room ``start``'s room opens onto, reached at once, goes on from its
-    end place to a room beyond (:func:`_onward`), and the check is of the two legs together.
+    end place to a room beyond (:func:`~localizer.route_frames.onward_route`), and the check
+    is of the two legs together.
     Returns the check, the frames captured (the turn compass's too), the homing to the route's
     end place and the place the robot homed to last (None: it stands where no homing
     arrived), to look from."""
@@ -370,11 +203,11 @@ def check_route(
     )
     frame = frame_by_view(to_start.last, view, stored, steered.odometry(), homing.step)
     if frame is not None and to_start.arrived:  # a route driven from elsewhere tells nothing
-        marks: list[_Mark] = []
+        marks: list[Mark] = []
 
         def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
             pose = frame.pose(steered.odometry())
-            marks.append(_Mark(localizer.extract(robot.capture().image), pose))
+            marks.append(Mark(localizer.extract(robot.capture().image), pose))
             steered.seen(marks[-1].view)  # the turn toward the next waypoint starts here
 
         leg, leg_frame = route, frame
@@ -393,22 +226,24 @@ def check_route(
             confirmed = seen and _at_once(at_end, leg, params, steered, leg_frame)
             onward = None
             if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
-                onward = _onward(
-                    localizer, steered, start.room, leg.end, at_end, params, homing.step
+                onward = onward_route(
+                    localizer, steered, start.room, leg.end, at_end, params.route_max_m, homing.step
                 )
             if onward is None or at_end.reason == CANCELLED:
                 break
             via, (leg, leg_frame) = leg.end, onward
-            route = _joined(route, leg)
+            route = joined_route(route, leg)
         frames += len(marks)
         # at the end place, a known place, the robot's odometry is fixed in the map's frame:
         # coming back to where the map has the start place, it retraced the recorded route
         known = None
         if confirmed and _end_fixes_the_frame(localizer, start.room, route, via):
-            known = _known_frame(localizer, steered, route.end, at_end, homing.step)
+            known = known_frame(localizer, steered, route.end, at_end, homing.step)
         way_back = None
         if seen and not confirmed and rival is not None:  # at the end place, known
-            way_back = _way_back(localizer, steered, route.end, at_end, rival, params, homing.step)
+            way_back = way_back_route(
+                localizer, steered, route.end, at_end, rival, params.route_max_m, homing.step
+            )
         if at_end.reason == CANCELLED:
             homed_to = route.end if at_end.arrived else None
         elif way_back is not None:
@@ -430,7 +265,7 @@ def check_route(
         else:
             # back through the views taken on the way out, each homed to (a frame fixed at the
             # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
-            driven_m, homings, held = _back_by_marks(
+            driven_m, homings, held = back_by_marks(
                 localizer, steered, marks, frame, stored, homing
             )
             back = home(start.id)
@@ -478,155 +313,6 @@ def check_route(
     return check, frames, at_end, homed_to
 
 
-def frame_by_view(
-    current: Fingerprint, view: Fingerprint, pose: Pose2D, odometry: Pose2D, step: StepParams
-) -> DriveFrame | None:
-    """A drive frame fixed for a robot whose view ``current`` (taken at odometry ``odometry``,
-    the robot not moved since) was taken where ``view`` was, at ``pose`` in that frame (a
-    place's stored view and pose, or a view the robot took on the drive and its odometry
-    then): the robot at ``pose``'s position, its heading ``pose``'s turned by the rotation
-    between ``current`` and ``view``; None if they do not match."""
-    try:
-        _, shift_rad = matched_inliers(current, view, step)
-    except HomingError:
-        return None
-    at = Pose2D(pose.x_m, pose.y_m, pose.heading_rad - shift_rad)
-    return DriveFrame(at, odometry)
-
-
-def place_frame(
-    localizer: Localizer, place_id: int, current: Fingerprint, odometry: Pose2D, step: StepParams
-) -> DriveFrame | None:
-    """:func:`frame_by_view` for place ``place_id``'s stored view and pose; None if the place
-    has no stored pose or the views do not match."""
-    place = localizer.map.place(place_id)
-    if place.x_m is None or place.y_m is None or place.heading_deg is None:
-        return None
-    stored = Pose2D(place.x_m, place.y_m, math.radians(place.heading_deg))
-    return frame_by_view(current, localizer.map.fingerprint(place_id), stored, odometry, step)
-
-
-@dataclass(frozen=True)
-class _Mark:
-    """A view the robot took on a route, and its pose then (drive frame, by odometry)."""
-
-    view: Fingerprint
-    pose: Pose2D
-
-
-def _back_by_marks(
-    localizer: Localizer,
-    robot: CompassedRobot,
-    marks: Sequence[_Mark],
-    frame: DriveFrame,
-    start: Pose2D,
-    homing: HomingParams,
-) -> tuple[float, int, bool]:
-    """Drive back through ``marks`` (last first) to ``start``'s position: at each, home to its
-    view and fix the drive frame again by it (``frame`` is the one of the way out). Returns the
-    odometric metres driven, the frames the homings captured, and whether the way back held:
-    the homing to the last mark homed to (the first taken, nearest the start) arrived, and so
-    did more than half of the homings to its marks (or there were none). A way back whose
-    homings to its marks do not arrive may end anywhere: on world seed 39's building (two
-    places per room), a robot in office_a whose homings to all seven of its marks gave up in
-    the seminar room and the corridor came back into office_b and homed at once to the spot of
-    office_a's place there (its check had arrived: sure and wrong, 0.997); of the other 30
-    ways back on that map, every last mark was reached. On world seed 47's building (one place
-    per room), a robot in office_a whose homings to six of its eight marks gave up reached the
-    last, nearest the start, in office_b, the start's twin: the check's miss was folded in,
-    and the belief favoured office_a, 0.82, for a robot now in office_b. Of 210 ways back in
-    six runs (seeds 37-47, both worlds, one and two places per room), 4 ended in another room
-    than they left, and had reached 0-2 of their 7-13 marks; the other 206 had reached their
-    last mark and at least 3 of 5 (60 %)."""
-    distance, frames, reached = 0.0, 0, []
-    for mark in (*reversed(marks), None):
-        here = frame.pose(robot.odometry())
-        to = (start.x_m, start.y_m) if mark is None else (mark.pose.x_m, mark.pose.y_m)
-        distance += drive_route(robot, route_through((here.x_m, here.y_m), (to,)), frame).distance_m
-        if mark is None:
-            break
-        # homing steers by its views: the bare robot, no compass on its turns
-        homed = drive_home(robot.robot, mark.view, localizer.extract, homing)
-        distance += homed.distance_m
-        frames += len(homed.lengths)
-        again = (
-            frame_by_view(homed.last, mark.view, mark.pose, robot.odometry(), homing.step)
-            if homed.arrived
-            else None
-        )
-        frame = again or frame
-        reached.append(homed.arrived)
-        if homed.arrived:  # it stands where it took its last view
-            robot.seen(homed.last)
-    held = not reached or (reached[-1] and 2 * sum(reached) > len(reached))
-    return distance, frames, held
-
-
-def _onward(
-    localizer: Localizer,
-    robot: Robot,
-    room: str,
-    place_id: int,
-    homed: HomingResult,
-    params: RouteCheckParams,
-    step: StepParams,
-) -> tuple[Route, DriveFrame] | None:
-    """A recorded route from place ``place_id`` (in a room ``room`` opens onto, where ``homed``
-    arrived at once) on to a room beyond: neither ``room`` nor a room it opens onto (the map's
-    edges) nor one with a look-alike; and the drive frame fixed by the place's stored view.
-    None if there is no such route (up to ``route_max_m``) or the frame cannot be fixed.
-
-    A route into a hall tells little where the hall repeats: driven from a look-alike that
-    opens onto it, it ends a look-alike's offset along the hall, where the view is the end
-    place's and homing arrives at once (world seed 39's house recorded one place per room:
-    hall checks arrived from the look-alike in 4 of 5 and ended three kidnappings sure and
-    wrong, 0.973). Re-anchored at the hall place, the drive on to a room beyond ends there
-    only if the robot was at the hall place, and from the look-alike's door it ends a
-    look-alike's offset off, where the room beyond does not repeat."""
-    doors = localizer.doors
-    leave = {name for name, twins in localizer.lookalikes.items() if twins}
-    leave |= {room, *doors.get(room, frozenset())}
-    on = route_out(localizer.map.legs, localizer.map.places, place_id, leave, params.route_max_m)
-    return _from_known(localizer, robot, place_id, homed, on, step)
-
-
-def _from_known(
-    localizer: Localizer,
-    robot: Robot,
-    place_id: int,
-    homed: HomingResult,
-    route: Route | None,
-    step: StepParams,
-) -> tuple[Route, DriveFrame] | None:
-    """``route`` (from place ``place_id``) and the drive frame fixed by the place's stored view
-    where ``homed`` arrived (:func:`_known_frame`); None if there is no route or no frame."""
-    if route is None:
-        return None
-    frame = _known_frame(localizer, robot, place_id, homed, step)
-    return None if frame is None else (route, frame)
-
-
-def _joined(first: Route, then: Route) -> Route:
-    """``first`` and ``then`` (which starts at ``first``'s end) as one route."""
-    return Route(
-        first.start,
-        then.end,
-        first.start_xy_m,
-        first.waypoints_xy_m + then.waypoints_xy_m,
-        first.length_m + then.length_m,
-    )
-
-
-def _known_frame(
-    localizer: Localizer, robot: Robot, place_id: int, homed: HomingResult, step: StepParams
-) -> DriveFrame | None:
-    """The drive frame fixed by place ``place_id``'s stored view and pose, where ``homed``
-    arrived; None if it did not, the place has no stored pose or the views do not match."""
-    if not homed.arrived:
-        return None
-    return place_frame(localizer, place_id, homed.last, robot.odometry(), step)
-
-
 def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
     """Whether ``route`` out of ``room`` ends beyond the rooms ``room`` opens onto (the map's
     edges): a hall a room opens onto may have a look-alike's door a look-alike's offset along
@@ -653,7 +339,7 @@ def _end_fixes_the_frame(localizer: Localizer, room: str, route: Route, via: int
     in bathroom_a, came back "retraced" to where the map has bedroom_b's place and ended sure
     of bedroom_b, 0.96-0.985, in 3 of 5 kidnappings). A route that went on from a hall place
     was fixed there, in the hall both look-alikes open onto, and its end is not at a twin's
-    offset (:func:`_onward`)."""
+    offset (:func:`~localizer.route_frames.onward_route`)."""
     if not _beyond_the_hall(localizer, room, route):
         return False
     return via is not None or not localizer.alone(localizer.map.place(route.end).room)
@@ -766,19 +452,3 @@ def _look_at_end(localizer: Localizer, robot: Robot, end: int) -> tuple[bool, fl
     seen = best is not None and localizer.map.place(best.place_id).room == room
     inliers = next((item.spread_inliers for item in places if item.place_id == end), 0.0)
     return seen, inliers
-
-
-def _way_back(
-    localizer: Localizer,
-    robot: Robot,
-    end: int,
-    at_end: HomingResult,
-    into: str,
-    params: RouteCheckParams,
-    step: StepParams,
-) -> tuple[Route, DriveFrame] | None:
-    """A recorded route from place ``end``, where homing ``at_end`` brought the robot, into
-    room ``into``, and the drive frame fixed by ``end``'s stored view; None if the homing did
-    not arrive, ``end`` has no stored pose, no route leads there or the views do not match."""
-    route = route_into(localizer.map.legs, localizer.map.places, end, {into}, params.route_max_m)
-    return _from_known(localizer, robot, end, at_end, route, step)

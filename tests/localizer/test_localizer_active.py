@@ -9,17 +9,11 @@ import numpy as np
 import pytest
 from robot_helpers import RobotWrapper
 
-from localizer.active import (
-    ENDINGS,
-    ActiveParams,
-    _step_away_if_stuck,
-    _way_in_step,
-    localize_actively,
-    matched_bearing_rad,
-    top_two_alike,
-)
+from localizer.active import ENDINGS, ActiveParams, localize_actively, top_two_alike
 from localizer.belief import LocalizationState, RoomBelief
+from localizer.last_looks import way_in_step
 from localizer.localizer import LoadedMap, Localizer
+from localizer.looking_elsewhere import matched_bearing_rad, step_away_if_stuck
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import CANCELLED, HomingResult, StepParams, drive_home
 from mapdb.loading import load_snapshot
@@ -511,7 +505,7 @@ def test_the_step_in_does_not_move_with_odometry_drifted_since_the_look_at_the_p
 
     def step_in_seen_by(seen_by: Robot) -> tuple[float, float]:
         """The step in's end: metres from the robot, and its bearing (rad) off the heading."""
-        found = _way_in_step(entered, seen_by, 0.5, StepParams(), set())
+        found = way_in_step(entered, seen_by, 0.5, StepParams(), set())
         assert found is not None
         frame, (x_m, y_m), _ = found
         here = frame.pose(seen_by.odometry())
@@ -612,8 +606,10 @@ def test_a_step_out_turns_by_what_the_robot_turned_since_its_look_was_taken(loca
     assert seen_rad is not None
     walled = WalledRobot()  # its odometry: (0, 0) facing 0; its first move bumps
     walled.odometry = lambda: Pose2D(0.0, 0.0, np.pi / 2)  # type: ignore[method-assign]
-    params = ActiveParams()
-    stepped_m = _step_away_if_stuck(walled, look, walled.odometry(), params)
+    p = ActiveParams()
+    stepped_m = step_away_if_stuck(
+        walled, look, walled.odometry(), p.lost_stuck_m, p.lost_step_m, p.lost_turn_deg
+    )
     expected = np.remainder(seen_rad - np.pi / 2 + np.pi, 2 * np.pi) - np.pi
-    assert walled.asked[0] == (pytest.approx(expected), params.lost_step_m)
-    assert stepped_m == pytest.approx(params.lost_step_m)  # bumped at once, then the other way
+    assert walled.asked[0] == (pytest.approx(expected), p.lost_step_m)
+    assert stepped_m == pytest.approx(p.lost_step_m)  # bumped at once, then the other way

@@ -1,5 +1,6 @@
-"""Checking a likely room by a recorded route: the parameters, which rooms to check first and
-what a room's checks have told (the drives themselves: tests/toploc/test_recorded_maps.py)."""
+"""Checking a likely room by a recorded route: the parameters (route_checks), which rooms to
+check first and what a room's checks have told (route_choice; the drives themselves:
+tests/toploc/test_recorded_maps.py)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,8 @@ import numpy as np
 import pytest
 
 from localizer.belief import RoomBelief
-from localizer.route_checks import (
-    RouteCheck,
-    RouteCheckParams,
+from localizer.route_checks import RouteCheck, RouteCheckParams
+from localizer.route_choice import (
     repeating_ends,
     rooms_to_check,
     starts_to_check_again,
