@@ -34,7 +34,7 @@ from localizer.route_choice import (
     telling_checks,
     told_outcomes,
 )
-from localizer.routes import drive_route, route_through
+from localizer.routes import Route, drive_route, route_through
 from localizer.visual_homing import (
     CANCELLED,
     HomingParams,
@@ -203,169 +203,235 @@ def localize_actively(
     """
     chosen = make_policy(policy) if isinstance(policy, str) else policy
     params = params or ActiveParams()
-    notify = on_belief or (lambda belief: None)
 
     def drive_to(place_id: int) -> HomingResult:
         goal = localizer.map.fingerprint(place_id)
         return drive_home(robot, goal, localizer.extract, params.homing)
 
-    go = home or drive_to
-    localizer.reset()
-    observation = _look(localizer, robot)
-    belief = localizer.update(observation)
-    first, frames, distance = belief, 1, 0.0
-    notify(belief)
-    visits: list[Visit] = []
-    context = PolicyContext(
-        similarity=localizer.similarity,
-        lookalikes=localizer.lookalikes,
-        counterparts=localizer.counterparts,
+    run = _ActiveRun(localizer, robot, params, home or drive_to, on_belief or (lambda _: None))
+    ended = None
+    while ended is None:
+        ended = run.turn(chosen)
+    return ActiveResult(
+        run.first,
+        run.belief,
+        tuple(run.visits),
+        run.frames,
+        run.distance_m,
+        run.looks_elsewhere,
+        ended,
+        tuple(run.checks),
     )
-    looks_elsewhere = 0
-    homed_lost: set[int] = set()
-    tried_routes: set[int] = set()
-    retried_routes: set[int] = set()
-    checks: list[RouteCheck] = []
-    looked_closer: set[int] = set()
-    stepped_in: set[int] = set()
 
-    def room_of(place_id: int) -> str:
-        return localizer.map.place(place_id).room
 
-    while True:
-        if belief.state is LocalizationState.LOST and looks_elsewhere < params.lost_looks:
-            looks_elsewhere += 1
-            faint = faintly_seen(observation, params.lost_home_min_inliers, homed_lost)
-            began, at_place = robot.odometry(), None
-            if faint is not None:  # the place it matched best, though too weakly to tell
-                homed_lost.add(faint)
-                homing = go(faint)
-                frames += len(homing.lengths)
-                distance += homing.distance_m
-                if homing.reason == CANCELLED:
-                    ended = CANCELLED
-                    break
-                at_place = faint
-            stepped_m = _step_out(robot, observation, began, params)
-            if stepped_m is not None:
-                distance += stepped_m
-                at_place = None
-            localizer.predict(HOMING_STAY_PROBABILITY)
-            observation = _look(localizer, robot, at_place)
-            belief = localizer.update(observation)
-            frames += 1
-            notify(belief)
-            continue
-        spent = _drives_spent(visits, params.max_targets)
+class _ActiveRun:
+    """One active localization under way: what the robot has seen, driven and checked so far,
+    and one method per kind of move the loop makes (:meth:`turn` picks the next)."""
+
+    def __init__(
+        self,
+        localizer: Localizer,
+        robot: Robot,
+        params: ActiveParams,
+        go: Callable[[int], HomingResult],
+        notify: Callable[[RoomBelief], None],
+    ) -> None:
+        self.localizer, self.robot, self.params = localizer, robot, params
+        self.go, self.notify = go, notify
+        localizer.reset()
+        self.observation = _look(localizer, robot)
+        self.belief = localizer.update(self.observation)
+        self.first = self.belief
+        self.frames, self.distance_m, self.looks_elsewhere = 1, 0.0, 0
+        notify(self.belief)
+        self.visits: list[Visit] = []
+        self.checks: list[RouteCheck] = []
+        self.context = PolicyContext(
+            similarity=localizer.similarity,
+            lookalikes=localizer.lookalikes,
+            counterparts=localizer.counterparts,
+        )
+        self.homed_lost: set[int] = set()  # places homed to while lost (each once)
+        self.tried_routes: set[int] = set()  # start places of route checks
+        self.retried_routes: set[int] = set()  # starts of checks that could not start, retried
+        self.looked_closer: set[int] = set()  # places homed to for a last look
+        self.stepped_in: set[int] = set()  # places stepped in from
+
+    def turn(self, policy: Policy) -> str | None:
+        """One move of the loop (a look elsewhere while lost, a route check, a last look, a
+        step in or a drive to the policy's place) and the look after it; why the loop ends (a
+        key of :data:`ENDINGS`), or None to go on."""
+        params = self.params
+        if self.belief.state is LocalizationState.LOST and self.looks_elsewhere < params.lost_looks:
+            return self.look_elsewhere()
+        spent = _drives_spent(self.visits, params.max_targets)
         target = active_step(
-            belief,
-            observation.evidence.places,
-            localizer.map.places,
-            chosen,
-            context,
+            self.belief,
+            self.observation.evidence.places,
+            self.localizer.map.places,
+            policy,
+            self.context,
             params.max_targets,
             spent,
         )
-        check = None
-        twins = top_two_alike(belief, localizer.map.rooms, localizer.lookalike_groups)
-        unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
         # rooms where routes of two look-alikes both arrived: a route that ends there tells
         # nothing (repeating_ends)
-        repeating = repeating_ends(checks, localizer.lookalikes, room_of)
-        if unsure or _to_confirm(localizer, belief, visits, checks, params.max_targets):
-            checked = Counter(done.room for done in checks)
-            check = route_to_check(
-                localizer, belief, observation, tried_routes, checked, params.routes, repeating
-            )
-            retry = {done.start for done in checks if not done.started} - retried_routes
-            if check is None and unsure and retry:
-                # a check that could not start told nothing, and the robot has moved on since:
-                # its start once more (world seed 63's building: a robot in office_a whose
-                # homings to office_b's two places gave up ended at 0.89 with drives left)
-                retried_routes.update(retry)
-                check = route_to_check(
-                    localizer,
-                    belief,
-                    observation,
-                    tried_routes - retry,
-                    checked,
-                    params.routes,
-                    repeating,
-                )
-            if check is None and unsure and repeating:
-                again = starts_to_check_again(checks, repeating, room_of)
-                check = route_to_check(
-                    localizer,
-                    belief,
-                    observation,
-                    tried_routes - again,
-                    checked,
-                    params.routes,
-                    repeating,
-                )
+        repeating = repeating_ends(self.checks, self.localizer.lookalikes, self._room_of)
+        check = self.route_check(target, spent, repeating)
         if check is not None:
-            start, route = check
-            tried_routes.add(start.id)
-            rival = likely_twin(belief, start.room, localizer.lookalikes)
-            notify(localizer.belief(LocalizationState.HOMING))
-            told = told_outcomes(telling_checks(checks, repeating, room_of), start.room)
-            began = robot.odometry()
-            done, captured, homing, homed_to = check_route(
-                localizer, robot, go, start, route, rival, params.routes, params.homing, told
-            )
-            if not done.started and homed_to is None and homing.reason != CANCELLED:
-                # the homing to the check's start gave up where it began: out of that corner
-                # before the next check (world seed 63's building, two places per room: a
-                # robot woken between a cabinet and the wall spent its four checks there)
-                distance += _step_out(robot, observation, began, params) or 0.0
-            localizer.predict(HOMING_STAY_PROBABILITY)
-            observation, looked = _look_again(localizer, robot, homed_to)
-            distance += done.distance_m
-            frames += captured + looked
-            belief = localizer.belief()
-            notify(belief)
-            checks.append(done)
-            end_room = localizer.map.place(done.end).room
-            visits.append(Visit(done.end, end_room, homing, belief, done.started))
-            if homing.reason == CANCELLED:
-                ended = CANCELLED
-                break
-            continue
+            return self.drive_check(*check, repeating)
         if target is None:
-            target = closer_look(localizer, looked_closer)
-            if target is None and params.end_at_place and spent < params.max_targets:
-                target = place_to_end_at(localizer, looked_closer)
-            if target is not None:
-                looked_closer.add(target)
-        if target is None and params.step_in_m > 0:
-            step_in = way_in_step(
-                localizer, robot, params.step_in_m, params.homing.step, stepped_in
-            )
-            if step_in is not None:
-                frame, inside, captured = step_in
-                frames += captured
-                looked_closer.update(stepped_in)  # its room is looked at: do not home back
-                notify(localizer.belief(LocalizationState.HOMING))
-                here = frame.pose(robot.odometry())
-                route = route_through((here.x_m, here.y_m), [inside])
-                distance += drive_route(robot, route, frame).distance_m
-                localizer.predict(HOMING_STAY_PROBABILITY)
-                observation = _look(localizer, robot)
-                belief = localizer.update(observation)
-                frames += 1
-                notify(belief)
-                continue
+            target = self.last_look(spent)
+        if target is None and self.step_in():
+            return None
         if target is None:
-            ended = _ending(belief, spent, params.max_targets)
-            break
-        context = context.trying(target)
+            return _ending(self.belief, spent, params.max_targets)
+        return self.drive_to(target)
+
+    def _room_of(self, place_id: int) -> str:
+        return self.localizer.map.place(place_id).room
+
+    def _look_here(self, at_place: int | None = None) -> None:
+        """Look where the robot stands (at place ``at_place``, if it homed to one) after a
+        move, and fold the frame into the belief."""
+        self.localizer.predict(HOMING_STAY_PROBABILITY)
+        self.observation = _look(self.localizer, self.robot, at_place)
+        self.belief = self.localizer.update(self.observation)
+        self.frames += 1
+
+    def _home(self, place_id: int) -> HomingResult:
+        """Drive to place ``place_id`` by ``go``, counting its frames and metres."""
+        homing = self.go(place_id)
+        self.frames += len(homing.lengths)
+        self.distance_m += homing.distance_m
+        return homing
+
+    def look_elsewhere(self) -> str | None:
+        """Lost: home to the place the last look matched best though too faintly to tell, if
+        any (each once), and step out of a corner, then look again (:class:`ActiveParams`)."""
+        self.looks_elsewhere += 1
+        faint = faintly_seen(self.observation, self.params.lost_home_min_inliers, self.homed_lost)
+        began, at_place = self.robot.odometry(), None
+        if faint is not None:  # the place it matched best, though too weakly to tell
+            self.homed_lost.add(faint)
+            if self._home(faint).reason == CANCELLED:
+                return CANCELLED
+            at_place = faint
+        stepped_m = _step_out(self.robot, self.observation, began, self.params)
+        if stepped_m is not None:
+            self.distance_m += stepped_m
+            at_place = None
+        self._look_here(at_place)
+        self.notify(self.belief)
+        return None
+
+    def route_check(
+        self, target: int | None, spent: int, repeating: frozenset[str]
+    ) -> tuple[Place, Route] | None:
+        """The start place of the room to check by a recorded route now, and the route
+        (:mod:`localizer.route_choice`): when the top two rooms look alike or the policy has no
+        place (``target`` None) and a drive is left, or the top room is to be confirmed
+        (:func:`_to_confirm`); None if not, or if no route is left."""
+        localizer, belief, params = self.localizer, self.belief, self.params
+        twins = top_two_alike(belief, localizer.map.rooms, localizer.lookalike_groups)
+        unsure = (target is None or twins) and _may_drive(belief, spent, params.max_targets)
+        if not (
+            unsure or _to_confirm(localizer, belief, self.visits, self.checks, params.max_targets)
+        ):
+            return None
+        checked = Counter(done.room for done in self.checks)
+
+        def first_route(tried: set[int]) -> tuple[Place, Route] | None:
+            return route_to_check(
+                localizer, belief, self.observation, tried, checked, params.routes, repeating
+            )
+
+        check = first_route(self.tried_routes)
+        retry = {done.start for done in self.checks if not done.started} - self.retried_routes
+        if check is None and unsure and retry:
+            # a check that could not start told nothing, and the robot has moved on since:
+            # its start once more (world seed 63's building: a robot in office_a whose
+            # homings to office_b's two places gave up ended at 0.89 with drives left)
+            self.retried_routes.update(retry)
+            check = first_route(self.tried_routes - retry)
+        if check is None and unsure and repeating:
+            again = starts_to_check_again(self.checks, repeating, self._room_of)
+            check = first_route(self.tried_routes - again)
+        return check
+
+    def drive_check(self, start: Place, route: Route, repeating: frozenset[str]) -> str | None:
+        """Check ``start``'s room by ``route`` (:func:`~localizer.route_checks.check_route`)
+        and look where the robot stands then."""
+        localizer, robot, params = self.localizer, self.robot, self.params
+        self.tried_routes.add(start.id)
+        rival = likely_twin(self.belief, start.room, localizer.lookalikes)
+        self.notify(localizer.belief(LocalizationState.HOMING))
+        told = told_outcomes(telling_checks(self.checks, repeating, self._room_of), start.room)
+        began = robot.odometry()
+        done, captured, homing, homed_to = check_route(
+            localizer, robot, self.go, start, route, rival, params.routes, params.homing, told
+        )
+        if not done.started and homed_to is None and homing.reason != CANCELLED:
+            # the homing to the check's start gave up where it began: out of that corner
+            # before the next check (world seed 63's building, two places per room: a
+            # robot woken between a cabinet and the wall spent its four checks there)
+            self.distance_m += _step_out(robot, self.observation, began, params) or 0.0
+        localizer.predict(HOMING_STAY_PROBABILITY)
+        self.observation, looked = _look_again(localizer, robot, homed_to)
+        self.distance_m += done.distance_m
+        self.frames += captured + looked
+        self.belief = localizer.belief()
+        self.notify(self.belief)
+        self.checks.append(done)
+        end_room = self._room_of(done.end)
+        self.visits.append(Visit(done.end, end_room, homing, self.belief, done.started))
+        return CANCELLED if homing.reason == CANCELLED else None
+
+    def last_look(self, spent: int) -> int | None:
+        """The place to home to for a last look before the loop ends, if any
+        (:func:`~localizer.last_looks.closer_look`, then, with a drive left,
+        :func:`~localizer.last_looks.place_to_end_at`); each once."""
+        target = closer_look(self.localizer, self.looked_closer)
+        if target is None and self.params.end_at_place and spent < self.params.max_targets:
+            target = place_to_end_at(self.localizer, self.looked_closer)
+        if target is not None:
+            self.looked_closer.add(target)
+        return target
+
+    def step_in(self) -> bool:
+        """Step further into the room the belief is ``localized`` in from the place recorded
+        on the way in where the robot looked (:func:`~localizer.last_looks.way_in_step`) and
+        look there; whether it did."""
+        localizer, robot, params = self.localizer, self.robot, self.params
+        if params.step_in_m <= 0:
+            return False
+        step_in = way_in_step(
+            localizer, robot, params.step_in_m, params.homing.step, self.stepped_in
+        )
+        if step_in is None:
+            return False
+        frame, inside, captured = step_in
+        self.frames += captured
+        self.looked_closer.update(self.stepped_in)  # its room is looked at: do not home back
+        self.notify(localizer.belief(LocalizationState.HOMING))
+        here = frame.pose(robot.odometry())
+        route = route_through((here.x_m, here.y_m), [inside])
+        self.distance_m += drive_route(robot, route, frame).distance_m
+        self._look_here()
+        self.notify(self.belief)
+        return True
+
+    def drive_to(self, target: int) -> str | None:
+        """Home to place ``target`` (and its counterparts on that spot are looked at from
+        there), back to the place the robot stood at if that homing did not arrive, and look
+        where the robot stands then, unless it is back where it looked last."""
+        localizer, params = self.localizer, self.params
+        self.context = self.context.trying(target)
         for same_spot in localizer.same_spot_places(target):  # looked at from there already
-            context = context.trying(same_spot)
-        notify(localizer.belief(LocalizationState.HOMING))
+            self.context = self.context.trying(same_spot)
+        self.notify(localizer.belief(LocalizationState.HOMING))
         stood_at = localizer.latest.at_place if localizer.latest is not None else None
-        homing = go(target)
-        frames += len(homing.lengths)
-        distance += homing.distance_m
+        homing = self._home(target)
         looked_from: int | None = target
         cancelled = homing.reason == CANCELLED
         if not homing.arrived and not cancelled and stood_at is not None:
@@ -373,31 +439,20 @@ def localize_actively(
             # where the homing gave up may be another room (world seed 33's house, one place
             # per room: 3 of 20 robots homed from bathroom_a toward bathroom_b's place gave up
             # in the hall, and ended there while the belief was of bathroom_a)
-            back = go(stood_at)
-            frames += len(back.lengths)
-            distance += back.distance_m
+            back = self._home(stood_at)
             looked_from = stood_at if back.arrived else None
             cancelled = back.reason == CANCELLED
         came_back = looked_from == stood_at != target
         if came_back:
-            belief = localizer.belief()  # back where it looked last: the same view tells no more
+            self.belief = localizer.belief()  # back where it looked last: no new evidence
         elif homing.distance_m >= params.min_new_view_m:
-            localizer.predict(HOMING_STAY_PROBABILITY)
-            observation = _look(localizer, robot, looked_from)
-            belief = localizer.update(observation)
-            frames += 1
+            self._look_here(looked_from)
         else:
-            belief = localizer.belief()
-        notify(belief)
-        visits.append(
-            Visit(target, localizer.map.place(target).room, homing, belief, not came_back)
-        )
-        if cancelled:
-            ended = CANCELLED
-            break
-    return ActiveResult(
-        first, belief, tuple(visits), frames, distance, looks_elsewhere, ended, tuple(checks)
-    )
+            self.belief = localizer.belief()
+        self.notify(self.belief)
+        room = self._room_of(target)
+        self.visits.append(Visit(target, room, homing, self.belief, not came_back))
+        return CANCELLED if cancelled else None
 
 
 def _look(localizer: Localizer, robot: Robot, at_place: int | None = None) -> Observation:
