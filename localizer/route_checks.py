@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Pose2D, Robot
@@ -184,16 +184,9 @@ def check_route(
     end place and the place the robot homed to last (None: it stands where no homing
     arrived), to look from."""
     assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
-    distance, frames = 0.0, 0
     stood_at = localizer.latest.at_place if localizer.latest is not None else None
     to_start = home(start.id)
-    distance += to_start.distance_m
-    frames += len(to_start.lengths)
-    confirmed, at_end, end_inliers, back_room, afresh = False, to_start, 0.0, None, False
-    via: int | None = None
-    homed_to = start.id if to_start.arrived else None  # where the robot stands at the end
     stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
-    view = localizer.map.fingerprint(start.id)
     # routes are driven, and drive frames kept, on odometry whose turns the camera measured
     steered = CompassedRobot(
         robot,
@@ -201,116 +194,195 @@ def check_route(
         homing.step,
         math.radians(params.compass_min_turn_deg),
     )
+    view = localizer.map.fingerprint(start.id)
     frame = frame_by_view(to_start.last, view, stored, steered.odometry(), homing.step)
+    out = None
+    back = _Back(None, False, start.id if to_start.arrived else None)
     if frame is not None and to_start.arrived:  # a route driven from elsewhere tells nothing
-        marks: list[Mark] = []
-
-        def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
-            pose = frame.pose(steered.odometry())
-            marks.append(Mark(localizer.extract(robot.capture().image), pose))
-            steered.seen(marks[-1].view)  # the turn toward the next waypoint starts here
-
-        leg, leg_frame = route, frame
-        while True:
-            distance += drive_route(steered, leg, leg_frame, mark).distance_m
-            at_end = home(leg.end)
-            distance += at_end.distance_m
-            frames += len(at_end.lengths)
-            seen, end_inliers = False, 0.0
-            if at_end.arrived:
-                seen, end_inliers = _look_at_end(localizer, robot, leg.end)
-                frames += 1
-            # at once, and the look there names the end room (which has no look-alike): a
-            # homing that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the
-            # robot was not in arrived at once)
-            confirmed = seen and _at_once(at_end, leg, params, steered, leg_frame)
-            onward = None
-            if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
-                onward = onward_route(
-                    localizer, steered, start.room, leg.end, at_end, params.route_max_m, homing.step
-                )
-            if onward is None or at_end.reason == CANCELLED:
-                break
-            via, (leg, leg_frame) = leg.end, onward
-            route = joined_route(route, leg)
-        frames += len(marks)
-        # at the end place, a known place, the robot's odometry is fixed in the map's frame:
-        # coming back to where the map has the start place, it retraced the recorded route
-        known = None
-        if confirmed and _end_fixes_the_frame(localizer, start.room, route, via):
-            known = known_frame(localizer, steered, route.end, at_end, homing.step)
-        way_back = None
-        if seen and not confirmed and rival is not None:  # at the end place, known
-            way_back = way_back_route(
-                localizer, steered, route.end, at_end, rival, params.route_max_m, homing.step
-            )
-        if at_end.reason == CANCELLED:
-            homed_to = route.end if at_end.arrived else None
-        elif way_back is not None:
-            # at the end place, in a room without a look-alike, the robot knows where it is,
-            # and a recorded route from there leads into the look-alike the check did not
-            # refute: if the robot reaches a place of it at once, it is there
-            back_route, back_frame = way_back
-            distance += drive_route(steered, back_route, back_frame).distance_m
-            back = home(back_route.end)
-            distance += back.distance_m
-            frames += len(back.lengths)
-            homed_to = back_route.end if back.arrived else None
-            if _at_once(back, back_route, params, steered, back_frame):
-                back_room = localizer.map.place(back_route.end).room
-                localizer.update_rooms({back_room: _route_ratio(params)})
-            else:  # somewhere along the way back: the look decides
-                localizer.reset()
-                afresh = True
-        else:
-            # back through the views taken on the way out, each homed to (a frame fixed at the
-            # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
-            driven_m, homings, held = back_by_marks(
-                localizer, steered, marks, frame, stored, homing
-            )
-            back = home(start.id)
-            distance += driven_m + back.distance_m
-            frames += homings + len(back.lengths)
-            homed_to = start.id if back.arrived else None
-            if held and _at_once(back, route, params):  # back where it began: it tells about it
-                back_room = start.room
-                if not confirmed and localizer.alone(start.room):
-                    localizer.doubt(start.room)  # its looks may have been an unknown twin's
-                if confirmed not in told:
-                    hall = _hall_check_alone(localizer, start.room, route, params)
-                    ratio = _route_ratio(params, hall) if confirmed else _miss_ratio(params, hall)
-                    if known is not None and _retraced(known, steered, start, route, params):
-                        ratio *= _route_ratio(params)  # it is in start's room now, by the map
-                    localizer.update_rooms({start.room: ratio})
-            elif not (held and back.arrived):  # it may be in any room now: the look decides
-                localizer.reset()
-                afresh = True
+        out = _drive_out(localizer, steered, home, start, route, frame, params, homing)
+        back = _come_back(localizer, steered, home, start, out, frame, rival, params, homing, told)
     elif not to_start.arrived and stood_at is not None and to_start.reason != CANCELLED:
         # the check could not start: back to the place the robot stood at, not left where the
         # homing gave up (world seed 30's house, one place per room: a robot at bedroom_b's
         # place by its door, whose homing to the hall's place gave up in the hall, looked there
         # and ended sure of bedroom_b, 0.977, no longer in it)
-        back = home(stood_at)
-        distance += back.distance_m
-        frames += len(back.lengths)
-        homed_to = stood_at if back.arrived else None
-    frames += steered.views  # the views that measured the route drives' turns
+        homed = home(stood_at)
+        homed_to = stood_at if homed.arrived else None
+        back = _Back(None, False, homed_to, homed.distance_m, len(homed.lengths))
+    at_end = to_start if out is None else out.at_end
     started = at_end is not to_start  # the route was driven
-    end_homing_m = at_end.distance_m if started else 0.0
     check = RouteCheck(
         start.room,
         start.id,
-        route.end,
-        confirmed,
-        distance,
-        end_inliers,
-        end_homing_m,
-        back_room,
+        route.end if out is None else out.route.end,
+        out is not None and out.confirmed,
+        to_start.distance_m + (0.0 if out is None else out.distance_m) + back.distance_m,
+        0.0 if out is None else out.end_inliers,
+        at_end.distance_m if started else 0.0,
+        back.room,
         started,
-        afresh,
-        via,
+        back.afresh,
+        None if out is None else out.via,
     )
-    return check, frames, at_end, homed_to
+    frames = len(to_start.lengths) + (0 if out is None else out.frames) + back.frames
+    return check, frames + steered.views, at_end, back.homed_to
+
+
+@dataclass(frozen=True)
+class _Out:
+    """How the drive out of a route check went: the ``route`` driven (its legs joined, if it
+    went on from ``via``), the homing to its end place (``at_end``), whether the look there
+    named the end place's room (``seen``) with ``end_inliers`` spread inliers, whether it
+    arrived at once (``confirmed``), the views taken on the way (``marks``), and the metres
+    and frames it took (the turn compass's views not counted)."""
+
+    route: Route
+    at_end: HomingResult
+    seen: bool
+    end_inliers: float
+    confirmed: bool
+    via: int | None
+    marks: tuple[Mark, ...]
+    distance_m: float
+    frames: int
+
+
+@dataclass(frozen=True)
+class _Back:
+    """How the way back of a route check went: the ``room`` whose place the robot came back to
+    at once (None: it did not), whether the belief started ``afresh``, the place the robot
+    homed to last (``homed_to``; None: it stands where no homing arrived), and the metres and
+    frames it took."""
+
+    room: str | None
+    afresh: bool
+    homed_to: int | None
+    distance_m: float = 0.0
+    frames: int = 0
+
+
+def _drive_out(
+    localizer: Localizer,
+    steered: CompassedRobot,
+    home: Callable[[int], HomingResult],
+    start: Place,
+    route: Route,
+    frame: DriveFrame,
+    params: RouteCheckParams,
+    homing: HomingParams,
+) -> _Out:
+    """Drive ``route`` from ``start``, where the robot stands (``frame`` fixed there), taking a
+    view at each waypoint, home to its end place and look there (see :func:`check_route`)."""
+    robot = steered.robot
+    marks: list[Mark] = []
+
+    def mark(_: int) -> None:  # a view at each waypoint: the way back homes to them
+        pose = frame.pose(steered.odometry())
+        marks.append(Mark(localizer.extract(robot.capture().image), pose))
+        steered.seen(marks[-1].view)  # the turn toward the next waypoint starts here
+
+    distance, frames, via = 0.0, 0, None
+    leg, leg_frame = route, frame
+    while True:
+        distance += drive_route(steered, leg, leg_frame, mark).distance_m
+        at_end = home(leg.end)
+        distance += at_end.distance_m
+        frames += len(at_end.lengths)
+        seen, end_inliers = False, 0.0
+        if at_end.arrived:
+            seen, end_inliers = _look_at_end(localizer, robot, leg.end)
+            frames += 1
+        # at once, and the look there names the end room (which has no look-alike): a
+        # homing that arrives is no proof (on world seed 15, 4 of 27 checks of a twin the
+        # robot was not in arrived at once)
+        confirmed = seen and _at_once(at_end, leg, params, steered, leg_frame)
+        onward = None
+        if confirmed and via is None and not _beyond_the_hall(localizer, start.room, leg):
+            onward = onward_route(
+                localizer, steered, start.room, leg.end, at_end, params.route_max_m, homing.step
+            )
+        if onward is None or at_end.reason == CANCELLED:
+            break
+        via, (leg, leg_frame) = leg.end, onward
+        route = joined_route(route, leg)
+    frames += len(marks)
+    return _Out(route, at_end, seen, end_inliers, confirmed, via, tuple(marks), distance, frames)
+
+
+def _come_back(
+    localizer: Localizer,
+    steered: CompassedRobot,
+    home: Callable[[int], HomingResult],
+    start: Place,
+    out: _Out,
+    frame: DriveFrame,
+    rival: str | None,
+    params: RouteCheckParams,
+    homing: HomingParams,
+    told: frozenset[bool],
+) -> _Back:
+    """The way back of a route check driven out (``out``) from ``start`` (``frame`` fixed
+    there), and what it tells (see :func:`check_route`)."""
+    route, at_end = out.route, out.at_end
+    if at_end.reason == CANCELLED:
+        return _Back(None, False, route.end if at_end.arrived else None)
+    if out.seen and not out.confirmed and rival is not None:  # at the end place, known
+        way_back = way_back_route(
+            localizer, steered, route.end, at_end, rival, params.route_max_m, homing.step
+        )
+        if way_back is not None:
+            return _back_into_rival(localizer, steered, home, *way_back, params)
+    # at the end place, a known place, the robot's odometry is fixed in the map's frame:
+    # coming back to where the map has the start place, it retraced the recorded route
+    known = None
+    if out.confirmed and _end_fixes_the_frame(localizer, start.room, route, out.via):
+        known = known_frame(localizer, steered, route.end, at_end, homing.step)
+    # back through the views taken on the way out, each homed to (a frame fixed at the
+    # route's end, 8 m from the door, put the robot 0.75 m off it: world seed 15)
+    assert start.x_m is not None and start.y_m is not None and start.heading_deg is not None
+    stored = Pose2D(start.x_m, start.y_m, math.radians(start.heading_deg))
+    driven_m, homings, held = back_by_marks(localizer, steered, out.marks, frame, stored, homing)
+    back = home(start.id)
+    homed_to = start.id if back.arrived else None
+    done = _Back(None, False, homed_to, driven_m + back.distance_m, homings + len(back.lengths))
+    if held and _at_once(back, route, params):  # back where it began: it tells about it
+        if not out.confirmed and localizer.alone(start.room):
+            localizer.doubt(start.room)  # its looks may have been an unknown twin's
+        if out.confirmed not in told:
+            hall = _hall_check_alone(localizer, start.room, route, params)
+            ratio = _route_ratio(params, hall) if out.confirmed else _miss_ratio(params, hall)
+            if known is not None and _retraced(known, steered, start, route, params):
+                ratio *= _route_ratio(params)  # it is in start's room now, by the map
+            localizer.update_rooms({start.room: ratio})
+        return replace(done, room=start.room)
+    if not (held and back.arrived):  # it may be in any room now: the look decides
+        localizer.reset()
+        return replace(done, afresh=True)
+    return done
+
+
+def _back_into_rival(
+    localizer: Localizer,
+    steered: CompassedRobot,
+    home: Callable[[int], HomingResult],
+    back_route: Route,
+    back_frame: DriveFrame,
+    params: RouteCheckParams,
+) -> _Back:
+    """At a route's end place, in a room without a look-alike, the robot knows where it is, and
+    ``back_route`` from there leads into the look-alike the check did not refute: if the robot
+    reaches a place of it at once, it is there (its odds multiplied by the route ratio); if
+    not, it is somewhere along the way back and the belief starts afresh."""
+    distance = drive_route(steered, back_route, back_frame).distance_m
+    back = home(back_route.end)
+    homed_to = back_route.end if back.arrived else None
+    done = _Back(None, False, homed_to, distance + back.distance_m, len(back.lengths))
+    if _at_once(back, back_route, params, steered, back_frame):
+        room = localizer.map.place(back_route.end).room
+        localizer.update_rooms({room: _route_ratio(params)})
+        return replace(done, room=room)
+    localizer.reset()  # somewhere along the way back: the look decides
+    return replace(done, afresh=True)
 
 
 def _beyond_the_hall(localizer: Localizer, room: str, route: Route) -> bool:
