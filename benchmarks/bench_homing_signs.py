@@ -19,8 +19,14 @@ this prints:
   t-statistic) is right, and the score of ``best`` without it (``without the elevation
   vote``: the three votes of ``best`` before session 28).
 
-Run: ``python benchmarks/bench_homing_signs.py DATASET [DATASET ...]``; docs/homing.md names
-the datasets it was run on.
+With ``--per-pair``, also each pair whose ``best`` error exceeds the thesis's: the places'
+distance apart, the verification's inliers, the two methods' errors and the axis's, and each
+sign vote (+1: the axis as verified, -1: its opposite; the elevation vote with its
+t-statistic, counted only from :data:`localizer.visual_homing.ELEVATION_VOTE_MIN_T`) beside
+the sign the truth gives.
+
+Run: ``python benchmarks/bench_homing_signs.py [--per-pair] DATASET [DATASET ...]``;
+docs/homing.md names the datasets it was run on.
 """
 
 from __future__ import annotations
@@ -83,7 +89,7 @@ def weighted_cheirality(v: Verification, rays_query: np.ndarray, rays_place: np.
     return 1
 
 
-def run(dataset: Path) -> None:
+def run(dataset: Path, per_pair: bool = False) -> None:
     places = load_places(dataset)
     fingerprints = extract_fingerprints(
         [dataset / p.image for p in places], FeatureSettings(), workers=2
@@ -98,6 +104,7 @@ def run(dataset: Path) -> None:
 
     thesis = errors(_home_directions("thesis", places, cache, pairs))
     best = _home_directions("pose-vote", places, cache, pairs)
+    best_errors = errors(best)
     matched = _home_directions("matched-alv", places, cache, pairs)
     alvs = [alv_from_bearings(f.bearings_rad) for f in fingerprints]
     oracle, weighted, without_elevation = best.copy(), best.copy(), best.copy()
@@ -131,13 +138,22 @@ def run(dataset: Path) -> None:
         flip = total < 0 or (total == 0 and side < 0)
         weighted[k] = axis + math.pi if flip else axis
         cheirality = cheirality_sign(v, cache.rays(i), cache.rays(j))
-        elevation, _ = elevation_vote(v, cache.rays(i), cache.rays(j))
+        elevation, statistic = elevation_vote(v, cache.rays(i), cache.rays(j))
         without_elevation[k] = signed_pose_direction_rad(
             v, matched[k], alvs[i], alvs[j], cheirality
         )
+        if per_pair and best_errors[k] > thesis[k]:
+            print(
+                f"  {places[i].room} {i}->{j}: {np.hypot(*(positions[i] - positions[j])):.1f} m, "
+                f"{v.inliers} inliers; thesis {thesis[k]:.1f} deg, best {best_errors[k]:.1f} deg, "
+                f"axis {min(both):.1f} deg; truth {right_sign(both):+d}, cheirality "
+                f"{cheirality:+d}, elevation {elevation:+d} (t {statistic:.1f}), matched ALV "
+                f"{side_of(matched[k], axis):+d}, ALV with the pose's yaw "
+                f"{side_of(alv_rad, axis):+d}"
+            )
         if min(both) > GOOD_AXIS_DEG:
             continue
-        right = 1 if both[0] <= both[1] else -1
+        right = right_sign(both)
         votes["cheirality"].append(cheirality == right)
         if elevation != 0:
             votes["elevation"].append(elevation == right)
@@ -147,13 +163,24 @@ def run(dataset: Path) -> None:
     shares = ", ".join(f"{name} {np.mean(v):.0%}" for name, v in votes.items() if v)
     print(
         f"{dataset.name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
-        f"{score(errors(best)):.3f}, oracle sign {score(errors(oracle)):.3f}, parallax-weighted "
+        f"{score(best_errors):.3f}, oracle sign {score(errors(oracle)):.3f}, parallax-weighted "
         f"{score(errors(weighted)):.3f}, without the elevation vote "
         f"{score(errors(without_elevation)):.3f}; "
         f"yaw error median {np.median(yaw_errors_deg):.1f} deg; "
         f"{len(votes['cheirality'])} pairs with the axis within "
         f"{GOOD_AXIS_DEG:.0f} deg, votes right: {shares}"
     )
+
+
+def right_sign(both_deg: np.ndarray) -> int:
+    """+1 where the axis as verified errs less than its opposite (:func:`errors_one`), else -1."""
+    return 1 if both_deg[0] <= both_deg[1] else -1
+
+
+def side_of(direction_rad: float, axis_rad: float) -> int:
+    """The side of ``axis_rad`` ``direction_rad`` lies on (+1 within 90° of it, -1 beyond), 0
+    for no direction (NaN)."""
+    return int(np.sign(math.cos(direction_rad - axis_rad))) if math.isfinite(direction_rad) else 0
 
 
 def errors_one(axis_rad: float, heading_rad: float, truth_rad: float) -> np.ndarray:
@@ -168,8 +195,12 @@ def errors_one(axis_rad: float, heading_rad: float, truth_rad: float) -> np.ndar
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("datasets", nargs="+", type=Path)
-    for dataset in parser.parse_args().datasets:
-        run(dataset)
+    parser.add_argument(
+        "--per-pair", action="store_true", help="also each pair where best errs more than thesis"
+    )
+    args = parser.parse_args()
+    for dataset in args.datasets:
+        run(dataset, args.per_pair)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState, StateThresholds, top_two_ratio
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult
-from localizer.route_checks import RouteCheckParams
+from localizer.route_checks import RouteCheckParams, check_route
+from localizer.routes import route_out
 from localizer.visual_homing import HomingResult, drive_home
 from mapdb.database import MapDatabase
 from robot.render import PanoramaCamera
@@ -515,6 +516,61 @@ def test_a_check_into_a_hall_that_repeats_is_told_by_the_drive_on_beyond_it(driv
     assert not (
         result.final.top[0] == "office_a" and result.final.state is LocalizationState.LOCALIZED
     )
+
+
+def _check_of_office_a_arriving_late(driven, rival_reached_at_once: bool):
+    """A robot in office_a checks office_a by its route into the corridor, homings carried out
+    perfectly (the robot put at the place's true pose) but the one to the corridor's place
+    late (further than the odometry's drift allows); the rival is office_b. Returns the check,
+    the place the robot homed to last, the robot and the belief before and after."""
+    db, recorded = driven
+    truth = {place.place_id: place.true_pose for place in recorded}
+    loaded = load_map(db)
+    localizer = Localizer(loaded)
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+    localizer.update(localizer.observe(robot.capture().image))
+    before = localizer.belief()
+    params = ActiveParams()
+
+    def home(place_id: int) -> HomingResult:
+        room, pose = loaded.place(place_id).room, truth[place_id]
+        if room == "office_b" and not rival_reached_at_once:
+            return HomingResult(False, 1, 0.5, "converged", loaded.fingerprint(place_id))
+        here = robot.true_pose
+        robot.carry(pose)
+        driven_m = math.dist((here.x_m, here.y_m), (pose.x_m, pose.y_m))
+        if room == "corridor":
+            driven_m += params.routes.route_slack_max_m + 1.0
+        return HomingResult(True, 1, driven_m, "arrived", localizer.extract(robot.capture().image))
+
+    start = next(p for p in loaded.places if p.room == "office_a" and p.id in loaded.legs)
+    route = route_out(loaded.legs, loaded.places, start.id, {"office_a", "office_b"}, 20.0)
+    assert route is not None and loaded.place(route.end).room == "corridor"
+    check, _, _, homed_to = check_route(
+        localizer, robot, home, start, route, "office_b", params.routes, params.homing
+    )
+    return check, homed_to, robot, before, localizer.belief()
+
+
+def test_a_check_that_reached_its_end_late_goes_into_the_rival_by_a_recorded_route(driven):
+    """At the route's end place, reached late, the robot still knows where it is (a room
+    without a look-alike): a recorded route from there into the rival that reaches the rival's
+    place at once puts the robot there, and multiplies the rival's odds by the route ratio."""
+    check, homed_to, robot, before, after = _check_of_office_a_arriving_late(driven, True)
+    assert (check.confirmed, check.back_room, check.afresh) == (False, "office_b", False)
+    assert homed_to is not None and robot.true_room() == "office_b" == after.top[0]
+    ratio = odds(after, "office_b", "office_a") / odds(before, "office_b", "office_a")
+    params = RouteCheckParams()
+    assert ratio == pytest.approx(params.route_hit_rate / params.route_false_rate)
+
+
+def test_a_way_into_the_rival_that_does_not_arrive_starts_the_belief_afresh(driven):
+    """The same check, but the rival's place is not reached: the robot is somewhere along the
+    way back, and the belief starts afresh (the next look decides)."""
+    check, homed_to, _, _, after = _check_of_office_a_arriving_late(driven, False)
+    assert (check.confirmed, check.back_room, check.afresh) == (False, None, True)
+    assert homed_to is None
+    assert after.top[1] == pytest.approx(1.0 / len(after.ranked()))  # uniform again
 
 
 class FoggedRobot(RobotWrapper):
