@@ -60,8 +60,12 @@ Session 41 wrote its step-in frame fix on seed 83's house trial 5 and judged it 
 house bathroom trials (K = 1; trial 2 looked at) and seed 83's, looked at seed 83's trial 1
 and seed 85's trial 0 for a change it did not keep, and judged the code on seed 87 (record
 seed 88) and, with two places per room, seed 89 (record seed 90); a review's mends to the
-re-checks were measured again on seeds 83 and 85 only. World seeds 91 and up have not been
-looked at: the next change must be judged on them.
+re-checks were measured again on seeds 83 and 85 only. Session 42 changed no behaviour (it
+ran seed 87's building, K = 2, and seed 85's house, K = 1, before and after to show it), tried
+a homing it did not keep on seed 87's building (K = 2) and seed 81's house (K = 1), looked at
+the homings of seed 87's building trial 18, and measured main once on seed 91 (record seed
+92; K = 1 and 2), none of whose trials it looked into. World seeds 93 and up have not been run
+at all; seed 91 may judge a change too.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
