@@ -36,12 +36,12 @@ def closer_look(localizer: Localizer, looked: set[int]) -> int | None:
 
 def place_to_end_at(localizer: Localizer, looked: set[int]) -> int | None:
     """The place to home to before a ``localized`` belief is taken
-    (:attr:`ActiveParams.end_at_place`): of the belief's room, the place the latest frame
-    verified with most spread inliers; None when the belief is not ``localized``, the latest
-    frame was taken where the robot homed to a place of that room (or to its counterpart on
-    one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of its places for a
-    closer look already (``looked``: once per room, even where that homing did not move it),
-    or the frame verified no place of it."""
+    (:attr:`~localizer.active.ActiveParams.end_at_place`): of the belief's room, the place the
+    latest frame verified with most spread inliers; None when the belief is not ``localized``,
+    the latest frame was taken where the robot homed to a place of that room (or to its
+    counterpart on one spot, :meth:`Localizer.same_spot_places`), the robot homed to one of its
+    places for a closer look already (``looked``: once per room, even where that homing did not
+    move it), or the frame verified no place of it."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
@@ -62,19 +62,19 @@ def way_in_step(
 ) -> tuple[DriveFrame, tuple[float, float], int] | None:
     """Where to drive further into the room the belief is ``localized`` in, when the latest
     frame was taken at a place of that room recorded on a drive in from another room
-    (:attr:`ActiveParams.step_in_m`): the point ``step_m`` past the place along the way the
-    drive came in (:func:`~localizer.routes.way_in_rad`), and the drive frame to steer to it
-    in, fixed by the robot standing at the place when it took that frame, its heading by the
-    frame's rotation against the place's stored view
-    (:func:`~localizer.route_frames.place_frame`, as a route check fixes its frame at a
-    place). Driven as a route (a step that bumps slides past: a robot homed into a doorway off
-    its middle meets the door frame). The frame is fixed on a view taken where the robot
-    stands: the latest frame's if the robot has not moved since (odometry), else a new capture
-    (a route check that ends back at the place reuses the look taken there before it, and its
-    odometry has drifted since: on world seed 83's house, one place per room, 20 m of route
-    later it put the robot about 2 m and 44° off, and the step in drove out into the hall);
-    with the captures made for it (0 or 1). None when there is no such place, it is in
-    ``stepped`` (added to it: once per place), or the frame does not match its view."""
+    (:attr:`~localizer.active.ActiveParams.step_in_m`): the point ``step_m`` past the place
+    along the way the drive came in (:func:`~localizer.routes.way_in_rad`), and the drive frame
+    to steer to it in, fixed by the robot standing at the place when it took that frame, its
+    heading by the frame's rotation against the place's stored view
+    (:func:`~localizer.route_frames.place_frame`, as a route check fixes its frame at a place).
+    Driven as a route (a step that bumps slides past: a robot homed into a doorway off its
+    middle meets the door frame). The frame is fixed on a view taken where the robot stands: the
+    latest frame's if the robot has not moved since (odometry), else a new capture (a route
+    check that ends back at the place reuses the look taken there before it, and its odometry
+    has drifted since: on world seed 83's house, one place per room, 20 m of route later it put
+    the robot about 2 m and 44° off, and the step in drove out into the hall); with the captures
+    made for it (0 or 1). None when there is no such place, it is in ``stepped`` (added to it:
+    once per place), or the frame does not match its view."""
     belief, latest = localizer.belief(), localizer.latest
     if belief.state is not LocalizationState.LOCALIZED or latest is None:
         return None
