@@ -4,6 +4,7 @@ driving through the same node."""
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -14,14 +15,17 @@ from pathlib import Path
 import pytest
 from bus_helpers import free_endpoint, wait_for
 
+from localizer.localizer import LoadedMap, Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
+from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
 from robot.sim_robot import SimulatedRobot
 from robot.worlds import make_world
 from toploc import bus
 from toploc.bus import BusConfig, open_session
-from toploc.nodes.homing import HomingClient
+from toploc.nodes.homing import HomingClient, HomingService
 from toploc.nodes.localizer import LocalizerClient
+from toploc.runner import LocalizationRunner
 from toploc.service import Service, start_service
 
 CAMERA = PanoramaCamera(512, 96)
@@ -92,6 +96,20 @@ def run_goal(client: HomingClient, place_id: int, results: list, timeout_s: floa
     worker = threading.Thread(target=goal)
     worker.start()
     return worker
+
+
+def test_each_drive_ends_with_a_log_line_of_its_place_room_and_how_it_ended(building_map, caplog):
+    """A service owner reads each drive of an active localization in the log, not only its
+    end: where to, how it ended, how far."""
+    localizer = Localizer(LoadedMap.from_snapshot(load_snapshot(building_map[0])))
+    homing = HomingService(LocalizationRunner(localizer, near_kitchen_place()))
+    with caplog.at_level(logging.INFO, logger="toploc.nodes.homing"):
+        result = homing.home(KITCHEN_PLACE)
+    lines = [record.getMessage() for record in caplog.records]
+    assert lines == [
+        f"homing to place {KITCHEN_PLACE} (kitchen): {result.reason} after {result.steps} "
+        f"moves, {result.distance_m:.2f} m"
+    ]
 
 
 def test_a_goal_in_the_robots_room_arrives_and_publishes_progress(building_map):

@@ -42,6 +42,9 @@ That is an in-process call, not a ``homing/goal`` query to its own process: the 
 holds the robot during an active localization (a query would be refused as busy, or need a way
 to say it comes from the holder), and a query would add a timeout to choose and a bus (and an
 access control) that the localization's own drive would depend on.
+
+Each drive, a goal's or the active localizer's, ends with one INFO log line: the place, its
+room, how the drive ended, the moves made and the odometric metres driven.
 """
 
 from __future__ import annotations
@@ -267,6 +270,14 @@ class HomingService:
                 )
             end = {"step": result.steps, "moved_m": result.distance_m, "state": result.reason}
             self._publish({**progress_defaults(place_id), **drive.last_message, **end})
+            _log.info(
+                "homing to place %d (%s): %s after %d moves, %.2f m",
+                place_id,
+                localizer.map.place(place_id).room,
+                result.reason,
+                result.steps,
+                result.distance_m,
+            )
             return result
         finally:
             if timer is not None:
