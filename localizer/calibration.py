@@ -3,8 +3,8 @@
 Each stored place in turn is the query against the map without it (retrieval and verification
 exactly as for a real query, :func:`localizer.evidence.place_evidence` with ``exclude``). Its
 own room's best remaining place gives a same-room count, every other room's best place an
-other-room count (:class:`localizer.likelihood.CalibrationSamples`), and
-:func:`localizer.likelihood.fit_ratio_likelihood` turns them into the map's
+other-room count (:class:`localizer.likelihood_fit.CalibrationSamples`), and
+:func:`localizer.likelihood_fit.fit_ratio_likelihood` turns them into the map's
 :class:`~localizer.likelihood.RatioLikelihood`.
 
 A stored place is a panorama taken where another panorama of the same room was not, so its
@@ -24,12 +24,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from localizer.evidence import EvidenceParams, PlaceEvidence, place_evidence
-from localizer.likelihood import (
-    CalibrationSamples,
-    RatioLikelihood,
-    fit_ratio_likelihood,
-    room_inliers,
-)
+from localizer.likelihood import RatioLikelihood, room_inliers
+from localizer.likelihood_fit import CalibrationSamples, fit_ratio_likelihood
 from localizer.localizer import LoadedMap
 from localizer.lookalikes import alike_by_appearance, is_counterpart, partners_of
 

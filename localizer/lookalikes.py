@@ -2,7 +2,7 @@
 
 Two rooms are look-alikes when, in the map's own leave-one-out, each explains most of the
 other's views nearly as well as their own room does, or far above chance
-(:class:`localizer.likelihood.CalibrationSamples`), or shows what they show without verifying
+(:class:`localizer.likelihood_fit.CalibrationSamples`), or shows what they show without verifying
 it, as a twin a metre off does (:func:`alike_by_appearance`): the twin offices of
 ``building``, the twin bedrooms of ``house``. Between look-alikes the
 inlier count measures how near the robot is to a stored place, not which room it is in. On a
@@ -34,7 +34,8 @@ from typing import TypeVar
 
 import numpy as np
 
-from localizer.likelihood import PlaceScore, medians_without_each, place_count
+from localizer.likelihood import PlaceScore, place_count
+from localizer.likelihood_fit import medians_without_each
 
 K = TypeVar("K", bound=Hashable)
 

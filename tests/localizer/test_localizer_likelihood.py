@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from localizer.likelihood import (
+from localizer.likelihood import RatioLikelihood
+from localizer.likelihood_fit import (
     CalibrationSamples,
-    RatioLikelihood,
     fit_ratio_likelihood,
     largest_without_each,
     medians_without_each,

@@ -184,7 +184,7 @@ def test_one_frame_read_on_counterparts_moves_twins_by_at_most_the_cap():
 
 
 def test_a_room_seen_through_a_door_from_a_few_views_is_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     sizes = {"hall": 3, "bedroom_a": 2, "bedroom_b": 2}
     queries = [
@@ -201,7 +201,7 @@ def test_a_room_seen_through_a_door_from_a_few_views_is_no_look_alike():
 
 
 def test_rooms_joined_by_a_door_that_see_each_other_in_half_their_views_are_no_look_alikes():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # the bare house recorded on one drive, two places per room (world seed 17): one hall
     # place stands by bathroom_a's door and one bathroom place looks out through it; each
@@ -223,7 +223,7 @@ def test_rooms_joined_by_a_door_that_see_each_other_in_half_their_views_are_no_l
 
 
 def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_own_views():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # a map recorded with three places per office (world seed 2): the own office wins most
     # views, the twin explains all of them at 0.5-0.9 of that, every other room by chance
@@ -242,7 +242,7 @@ def test_twins_recorded_a_metre_apart_are_look_alikes_though_each_room_wins_its_
 
 
 def test_a_twin_far_above_chance_in_every_view_is_a_look_alike_at_a_fifth_of_the_count():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # a map recorded with three places per office (world seed 9): each office wins its own
     # views by four to six times, the twin stands at 14-31, every room but the corridor at 0-5
@@ -262,7 +262,7 @@ def test_a_twin_far_above_chance_in_every_view_is_a_look_alike_at_a_fifth_of_the
 
 
 def test_a_room_at_a_few_percent_of_the_own_count_is_no_look_alike_however_far_above_chance():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     sizes = {"kitchen": 3, "office_a": 3, "seminar": 3}
     queries = [
@@ -274,7 +274,7 @@ def test_a_room_at_a_few_percent_of_the_own_count_is_no_look_alike_however_far_a
 
 
 def test_a_room_no_query_came_from_is_no_look_alike_but_is_named_to_ask():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     sizes = {"office_a": 3, "office_b": 3, "kitchen": 3}
     queries = [
@@ -287,7 +287,7 @@ def test_a_room_no_query_came_from_is_no_look_alike_but_is_named_to_ask():
 
 
 def test_bare_twins_at_a_few_inliers_are_look_alikes_when_every_other_room_is_chance():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # the bare house recorded three places per room (world seed 0): the twin bedrooms explain
     # each other's views at 8-50 spread inliers, their own rooms at 6-21, the rest at 0-2
@@ -306,7 +306,7 @@ def test_bare_twins_at_a_few_inliers_are_look_alikes_when_every_other_room_is_ch
 
 
 def test_a_few_inliers_above_a_high_chance_level_make_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # shared texture lifts every room of these views to 5-9: 9 is no twin
     sizes = {"a": 2, "b": 2, "c": 2, "d": 2}
@@ -318,7 +318,7 @@ def test_a_few_inliers_above_a_high_chance_level_make_no_look_alike():
 
 
 def test_rooms_alike_by_appearance_in_half_the_views_each_are_look_alikes():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # one place per office, a metre apart in their frames: 20-23 inliers is not enough for
     # the count, but each view found the other office alike by its descriptors
@@ -336,7 +336,7 @@ def test_rooms_alike_by_appearance_in_half_the_views_each_are_look_alikes():
 
 
 def test_each_look_alike_pair_says_which_test_found_it():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # offices found by appearance only (one place each, few inliers, the kitchen near them);
     # bedrooms by their counts (each explains the other's views far above chance); bathrooms
@@ -362,7 +362,7 @@ def test_each_look_alike_pair_says_which_test_found_it():
 
 
 def test_a_room_that_outdoes_a_rooms_own_places_is_its_look_alike_from_one_side():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # a recorded house: bedroom_b explains bedroom_a's views as well as bedroom_a does, while
     # bedroom_b's own places stand near each other and find bedroom_a far below themselves
@@ -379,7 +379,7 @@ def test_a_room_that_outdoes_a_rooms_own_places_is_its_look_alike_from_one_side(
 
 
 def test_a_room_seen_through_a_door_that_outdoes_the_own_room_is_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # a bedroom's views near its door see the hall better than the bedroom's other place
     sizes = dict.fromkeys(["bedroom_a", "hall", "study", "kitchen", "bath"], 2)
@@ -395,7 +395,7 @@ def test_a_room_seen_through_a_door_that_outdoes_the_own_room_is_no_look_alike()
 
 
 def test_a_room_found_alike_from_one_side_only_is_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     sizes = {"office_a": 1, "office_b": 1, "kitchen": 1}
     queries = [
@@ -481,7 +481,7 @@ def test_a_room_below_half_the_own_rooms_matches_does_not_look_alike():
 
 
 def test_declared_look_alikes_are_a_pair_whatever_the_views_say():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     sizes = {"office_a": 2, "office_b": 2, "kitchen": 2}
     queries = [
@@ -508,7 +508,7 @@ HOUSE = dict.fromkeys(["bedroom_a", "bedroom_b", "hall", "living", "kitchen", "s
 
 
 def test_a_room_that_stands_out_of_every_other_room_in_a_rooms_views_is_its_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     samples = CalibrationSamples.from_queries(BEDROOMS, HOUSE)
     assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
@@ -516,14 +516,14 @@ def test_a_room_that_stands_out_of_every_other_room_in_a_rooms_views_is_its_look
 
 
 def test_rooms_joined_by_a_door_never_stand_out_as_look_alikes():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     doors = [("bedroom_a", "bedroom_b")]
     assert CalibrationSamples.from_queries(BEDROOMS, HOUSE, edges=doors).lookalike_pairs == ()
 
 
 def test_a_room_level_with_another_room_does_not_stand_out():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # the same views with the kitchen as high as the twin in each: shared texture, not a twin
     level = [(room, counts | {"kitchen": counts[t]}) for (room, counts), t in zip(
@@ -533,7 +533,7 @@ def test_a_room_level_with_another_room_does_not_stand_out():
 
 
 def test_a_room_standing_out_in_fewer_than_half_of_a_rooms_views_is_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     only_a = [(room, counts) for room, counts in BEDROOMS if room == "bedroom_a"]
     assert CalibrationSamples.from_queries(only_a, HOUSE).lookalike_pairs == ()
@@ -550,7 +550,7 @@ ONE_PLACE_HOUSE = dict.fromkeys(["bedroom_a", "bedroom_b", "hall", "living", "st
 
 
 def test_rooms_of_one_place_that_stand_out_in_each_others_views_are_look_alikes():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     samples = CalibrationSamples.from_queries(ONE_PLACE_BEDROOMS, ONE_PLACE_HOUSE)
     assert samples.lookalike_pairs == (("bedroom_a", "bedroom_b"),)
@@ -558,7 +558,7 @@ def test_rooms_of_one_place_that_stand_out_in_each_others_views_are_look_alikes(
 
 
 def test_a_room_of_one_place_standing_out_from_one_side_only_is_no_look_alike():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     # bedroom_b's view finds bedroom_a at chance level: perhaps a window, not a twin
     one_side = [
@@ -569,7 +569,7 @@ def test_a_room_of_one_place_standing_out_from_one_side_only_is_no_look_alike():
 
 
 def test_rooms_of_one_place_joined_by_a_door_never_stand_out_as_look_alikes():
-    from localizer.likelihood import CalibrationSamples
+    from localizer.likelihood_fit import CalibrationSamples
 
     door = [("bedroom_a", "bedroom_b")]
     samples = CalibrationSamples.from_queries(ONE_PLACE_BEDROOMS, ONE_PLACE_HOUSE, edges=door)
