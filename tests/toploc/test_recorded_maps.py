@@ -573,6 +573,41 @@ def test_a_way_into_the_rival_that_does_not_arrive_starts_the_belief_afresh(driv
     assert after.top[1] == pytest.approx(1.0 / len(after.ranked()))  # uniform again
 
 
+def test_a_way_back_that_held_keeps_the_belief_though_the_start_is_not_reached(driven):
+    """A robot in office_a checks office_a by its route into the corridor and comes back
+    through the views it took on the way out, but its last homing, to the start place's view,
+    does not arrive: it stands at the first view it took, in the room it left, so the belief
+    stands (nothing folded in, not started afresh)."""
+    db, recorded = driven
+    truth = {place.place_id: place.true_pose for place in recorded}
+    loaded = load_map(db)
+    localizer = Localizer(loaded)
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
+    localizer.update(localizer.observe(robot.capture().image))
+    before = localizer.belief()
+    params = ActiveParams()
+    start = next(p for p in loaded.places if p.room == "office_a" and p.id in loaded.legs)
+    homed: list[int] = []
+
+    def home(place_id: int) -> HomingResult:
+        homed.append(place_id)
+        view = localizer.extract(robot.capture().image)
+        if place_id == start.id and homed.count(place_id) > 1:  # back: it does not arrive
+            return HomingResult(False, 1, 0.1, "converged", view)
+        robot.carry(truth[place_id])  # at once, where the place was recorded
+        return HomingResult(True, 1, 0.1, "arrived", localizer.extract(robot.capture().image))
+
+    route = route_out(loaded.legs, loaded.places, start.id, {"office_a", "office_b"}, 20.0)
+    assert route is not None
+    check, _, _, homed_to = check_route(
+        localizer, robot, home, start, route, "office_b", params.routes, params.homing
+    )
+    assert check.started and check.confirmed
+    assert (check.back_room, check.afresh, homed_to) == (None, False, None)
+    assert robot.true_room() == "office_a"
+    assert localizer.belief().ranked() == pytest.approx(before.ranked())
+
+
 class FoggedRobot(RobotWrapper):
     """The simulated robot, whose camera sees a blank wall while ``fogged``, except in the
     rooms ``clear_in``."""
