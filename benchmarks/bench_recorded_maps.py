@@ -65,8 +65,10 @@ ran seed 87's building, K = 2, and seed 85's house, K = 1, before and after to s
 a homing it did not keep on seed 87's building (K = 2) and seed 81's house (K = 1), looked at
 the homings of seed 87's building trial 18, and measured main once on seed 91 (record seed
 92; K = 1 and 2), none of whose trials it looked into, and on seed 93's building (record seed
-94; K = 1 and 2), whose one-place trial 1 it then traced. World seeds 95 and up have not been
-run at all; seed 91, and seed 93's building with two places per room, may judge a change too.
+94; K = 1 and 2), whose one-place trial 1 it then traced and wrote a change on (a way back that
+held keeps the belief), judged on seed 91's four runs again (all the same: the case did not
+arise). World seeds 95 and up have not been run at all; seed 91, and seed 93's building with
+two places per room, may judge a change too.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
