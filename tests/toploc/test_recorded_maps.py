@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -518,48 +520,82 @@ def test_a_check_into_a_hall_that_repeats_is_told_by_the_drive_on_beyond_it(driv
     )
 
 
-def _check_of_office_a_arriving_late(driven, rival_reached_at_once: bool):
-    """A robot in office_a checks office_a by its route into the corridor, homings carried out
-    perfectly (the robot put at the place's true pose) but the one to the corridor's place
-    late (further than the odometry's drift allows); the rival is office_b. Returns the check,
-    the place the robot homed to last, the robot and the belief before and after."""
-    db, recorded = driven
-    truth = {place.place_id: place.true_pose for place in recorded}
-    loaded = load_map(db)
-    localizer = Localizer(loaded)
-    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
-    localizer.update(localizer.observe(robot.capture().image))
-    before = localizer.belief()
-    params = ActiveParams()
+class _OfficeACheck:
+    """A robot in office_a about to check office_a by its route into the corridor (the
+    ``driven`` map), office_b its rival, after one look; the test fakes the homings, and
+    :meth:`carry` is a perfect one (the robot put at the place's true pose)."""
+
+    def __init__(self, driven) -> None:
+        db, recorded = driven
+        self.truth = {place.place_id: place.true_pose for place in recorded}
+        self.loaded = load_map(db)
+        self.localizer = Localizer(self.loaded)
+        world = make_world("building")
+        self.robot = SimulatedRobot.kidnapped(world, "office_a", seed=0, camera=CAMERA)
+        self.localizer.update(self.localizer.observe(self.robot.capture().image))
+        self.before = self.localizer.belief()
+        self.params = ActiveParams()
+        self.start = next(
+            p for p in self.loaded.places if p.room == "office_a" and p.id in self.loaded.legs
+        )
+        route = route_out(
+            self.loaded.legs, self.loaded.places, self.start.id, {"office_a", "office_b"}, 20.0
+        )
+        assert route is not None and self.loaded.place(route.end).room == "corridor"
+        self.route = route
+
+    def view(self):
+        return self.localizer.extract(self.robot.capture().image)
+
+    def carry(self, place_id: int, late_m: float = 0.0) -> HomingResult:
+        """Homing to ``place_id`` that arrives, ``late_m`` metres later than the way there."""
+        here, pose = self.robot.true_pose, self.truth[place_id]
+        self.robot.carry(pose)
+        driven_m = math.dist((here.x_m, here.y_m), (pose.x_m, pose.y_m)) + late_m
+        return HomingResult(True, 1, driven_m, "arrived", self.view())
+
+    def run(self, home: Callable[[int], HomingResult]):
+        """The check, and the place the robot homed to last."""
+        params = self.params
+        check, _, _, homed_to = check_route(
+            self.localizer,
+            self.robot,
+            home,
+            self.start,
+            self.route,
+            "office_b",
+            params.routes,
+            params.homing,
+        )
+        return check, homed_to
+
+
+def _arriving_late(driven, rival_reached_at_once: bool) -> tuple[_OfficeACheck, Any, Any]:
+    """The office_a check, the homing to the corridor's place arriving late (further than the
+    odometry's drift allows), the rival's place reached at once or not: the case, the check
+    and the place the robot homed to last."""
+    case = _OfficeACheck(driven)
 
     def home(place_id: int) -> HomingResult:
-        room, pose = loaded.place(place_id).room, truth[place_id]
+        room = case.loaded.place(place_id).room
         if room == "office_b" and not rival_reached_at_once:
-            return HomingResult(False, 1, 0.5, "converged", loaded.fingerprint(place_id))
-        here = robot.true_pose
-        robot.carry(pose)
-        driven_m = math.dist((here.x_m, here.y_m), (pose.x_m, pose.y_m))
-        if room == "corridor":
-            driven_m += params.routes.route_slack_max_m + 1.0
-        return HomingResult(True, 1, driven_m, "arrived", localizer.extract(robot.capture().image))
+            return HomingResult(False, 1, 0.5, "converged", case.loaded.fingerprint(place_id))
+        late_m = case.params.routes.route_slack_max_m + 1.0 if room == "corridor" else 0.0
+        return case.carry(place_id, late_m)
 
-    start = next(p for p in loaded.places if p.room == "office_a" and p.id in loaded.legs)
-    route = route_out(loaded.legs, loaded.places, start.id, {"office_a", "office_b"}, 20.0)
-    assert route is not None and loaded.place(route.end).room == "corridor"
-    check, _, _, homed_to = check_route(
-        localizer, robot, home, start, route, "office_b", params.routes, params.homing
-    )
-    return check, homed_to, robot, before, localizer.belief()
+    check, homed_to = case.run(home)
+    return case, check, homed_to
 
 
 def test_a_check_that_reached_its_end_late_goes_into_the_rival_by_a_recorded_route(driven):
     """At the route's end place, reached late, the robot still knows where it is (a room
     without a look-alike): a recorded route from there into the rival that reaches the rival's
     place at once puts the robot there, and multiplies the rival's odds by the route ratio."""
-    check, homed_to, robot, before, after = _check_of_office_a_arriving_late(driven, True)
+    case, check, homed_to = _arriving_late(driven, True)
+    after = case.localizer.belief()
     assert (check.confirmed, check.back_room, check.afresh) == (False, "office_b", False)
-    assert homed_to is not None and robot.true_room() == "office_b" == after.top[0]
-    ratio = odds(after, "office_b", "office_a") / odds(before, "office_b", "office_a")
+    assert homed_to is not None and case.robot.true_room() == "office_b" == after.top[0]
+    ratio = odds(after, "office_b", "office_a") / odds(case.before, "office_b", "office_a")
     params = RouteCheckParams()
     assert ratio == pytest.approx(params.route_hit_rate / params.route_false_rate)
 
@@ -567,7 +603,8 @@ def test_a_check_that_reached_its_end_late_goes_into_the_rival_by_a_recorded_rou
 def test_a_way_into_the_rival_that_does_not_arrive_starts_the_belief_afresh(driven):
     """The same check, but the rival's place is not reached: the robot is somewhere along the
     way back, and the belief starts afresh (the next look decides)."""
-    check, homed_to, _, _, after = _check_of_office_a_arriving_late(driven, False)
+    case, check, homed_to = _arriving_late(driven, False)
+    after = case.localizer.belief()
     assert (check.confirmed, check.back_room, check.afresh) == (False, None, True)
     assert homed_to is None
     assert after.top[1] == pytest.approx(1.0 / len(after.ranked()))  # uniform again
@@ -578,34 +615,20 @@ def test_a_way_back_that_held_keeps_the_belief_though_the_start_is_not_reached(d
     through the views it took on the way out, but its last homing, to the start place's view,
     does not arrive: it stands at the first view it took, in the room it left, so the belief
     stands (nothing folded in, not started afresh)."""
-    db, recorded = driven
-    truth = {place.place_id: place.true_pose for place in recorded}
-    loaded = load_map(db)
-    localizer = Localizer(loaded)
-    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=0, camera=CAMERA)
-    localizer.update(localizer.observe(robot.capture().image))
-    before = localizer.belief()
-    params = ActiveParams()
-    start = next(p for p in loaded.places if p.room == "office_a" and p.id in loaded.legs)
+    case = _OfficeACheck(driven)
     homed: list[int] = []
 
     def home(place_id: int) -> HomingResult:
         homed.append(place_id)
-        view = localizer.extract(robot.capture().image)
-        if place_id == start.id and homed.count(place_id) > 1:  # back: it does not arrive
-            return HomingResult(False, 1, 0.1, "converged", view)
-        robot.carry(truth[place_id])  # at once, where the place was recorded
-        return HomingResult(True, 1, 0.1, "arrived", localizer.extract(robot.capture().image))
+        if place_id == case.start.id and homed.count(place_id) > 1:  # back: it does not arrive
+            return HomingResult(False, 1, 0.1, "converged", case.view())
+        return case.carry(place_id)  # at once, where the place was recorded
 
-    route = route_out(loaded.legs, loaded.places, start.id, {"office_a", "office_b"}, 20.0)
-    assert route is not None
-    check, _, _, homed_to = check_route(
-        localizer, robot, home, start, route, "office_b", params.routes, params.homing
-    )
+    check, homed_to = case.run(home)
     assert check.started and check.confirmed
     assert (check.back_room, check.afresh, homed_to) == (None, False, None)
-    assert robot.true_room() == "office_a"
-    assert localizer.belief().ranked() == pytest.approx(before.ranked())
+    assert case.robot.true_room() == "office_a"
+    assert case.localizer.belief().ranked() == pytest.approx(case.before.ranked())
 
 
 class FoggedRobot(RobotWrapper):
