@@ -133,7 +133,7 @@ def run(dataset: Path, per_pair: bool = False) -> None:
             )
         rough = [d for d in (matched[k], alv_rad) if math.isfinite(d)]
         side = weighted_cheirality(v, cache.rays(i), cache.rays(j))
-        alvs_say = sum(float(np.sign(math.cos(d - axis))) for d in rough)
+        alvs_say = sum(side_of(d, axis) for d in rough)
         total = side + alvs_say
         flip = total < 0 or (total == 0 and side < 0)
         weighted[k] = axis + math.pi if flip else axis
@@ -159,7 +159,7 @@ def run(dataset: Path, per_pair: bool = False) -> None:
             votes["elevation"].append(elevation == right)
         for name, d in (("matched ALV", matched[k]), ("ALV, pose yaw", alv_rad)):
             if math.isfinite(d):
-                votes[name].append(np.sign(math.cos(d - axis)) == right)
+                votes[name].append(side_of(d, axis) == right)
     shares = ", ".join(f"{name} {np.mean(v):.0%}" for name, v in votes.items() if v)
     print(
         f"{dataset.name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
