@@ -319,6 +319,21 @@ def test_the_bridge_follows_the_localizer_going_and_coming_back(graph):
         assert wait_for(lambda: "stale" not in (graph.bridge.last_published or {"stale": 1}), 5)
 
 
+def test_a_call_that_comes_before_the_bridge_heard_the_localizer_is_served(graph, monkeypatch):
+    # as when a ROS client calls just after `toploc serve --ros2` started: the liveliness
+    # subscriber's history has not reached the bridge yet (here it never will)
+    graph.bridge.close()
+    monkeypatch.setattr(Ros2Bridge, "_on_localizer_token", lambda _self, _sample: None)
+    graph.bridge = Ros2Bridge(graph.zbus.client, ROBOT_ID, graph.ros_session, Ros2Settings(DOMAIN))
+    assert not graph.bridge.localizer_up
+    reply = graph.call("/toploc/localize", trigger_request(), sequence=5)
+    response = ros_typestore().deserialize_cdr(
+        reply.ok.payload.to_bytes(), "std_srvs/msg/TriggerOut"
+    )
+    assert response.success is True and "office_a" in response.message
+    assert graph.service.calls == [("localize", False)]
+
+
 class HeldService(FakeService):
     """A service whose belief, taken when asked, is answered only once ``release`` is set."""
 

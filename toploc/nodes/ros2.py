@@ -71,6 +71,7 @@ POSE_TOPIC = "~/pose"
 LOCALIZE_SERVICE = "~/localize"
 LOCALIZE_ACTIVE_SERVICE = "~/localize_active"
 REINITIALIZE_SERVICE = "~/reinitialize_global_localization"
+TOKEN_QUERY_TIMEOUT_S = 1.0  # the wait for the localizer's token when the bridge has not heard it
 _log = logging.getLogger(__name__)
 
 
@@ -103,6 +104,7 @@ class Ros2Bridge:
         self.robot_id = bus.check_robot_id(robot_id)
         self.settings = settings or Ros2Settings()
         self.types = Ros2Types()
+        self._toploc_session = toploc_session
         self.localizer = LocalizerClient(toploc_session, robot_id, timeout_s, localize_timeout_s)
         self.map = MapClient(toploc_session, robot_id, timeout_s)
         self._lock = threading.Lock()
@@ -260,8 +262,23 @@ class Ros2Bridge:
     def _fail(self, why: str) -> Any:
         return self._trigger(False, why)
 
+    def _localizer_on_bus(self) -> bool:
+        """Whether the localizer's token is on toploc's bus: as this bridge last heard, or, when
+        it has not heard it (yet), as a liveliness query finds now. A call that comes just after
+        ``toploc serve --ros2`` started can come before the token's history reached this bridge;
+        it is served, not told that the localizer is away."""
+        if self.localizer_up:
+            return True
+        key = bus.alive_key(self.robot_id, LOCALIZER_NODE)
+        try:
+            replies = self._toploc_session.liveliness().get(key, timeout=TOKEN_QUERY_TIMEOUT_S)
+            return any(reply.ok is not None for reply in replies)
+        except zenoh.ZError as error:
+            _log.warning("could not ask toploc's bus for %s: %s", key, error)
+            return False
+
     def _localize(self, active: bool) -> Any:
-        if not self.localizer_up:
+        if not self._localizer_on_bus():
             return self._fail(
                 f"toploc's localizer for robot {self.robot_id!r} is not on the bus "
                 f"({bus.alive_key(self.robot_id, LOCALIZER_NODE)}): is toploc serve running?"
