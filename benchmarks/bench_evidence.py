@@ -33,7 +33,7 @@ from localizer.cameras import CameraSpec
 from localizer.evidence import EvidenceParams, place_evidence
 from localizer.features import extract_with_camera
 from localizer.likelihood import COUNTS, room_inliers
-from localizer.localizer import LoadedMap
+from localizer.loaded_map import LoadedMap
 from localizer.panorama_io import read_panorama
 from mapdb.dataset import read_manifest
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place

@@ -39,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from mapdb.loading import load_snapshot
 from robot.worlds import make_world

@@ -26,7 +26,7 @@ import numpy as np
 from localizer.evidence import EvidenceParams, PlaceEvidence, place_evidence
 from localizer.likelihood import RatioLikelihood, room_inliers
 from localizer.likelihood_fit import CalibrationSamples, fit_ratio_likelihood
-from localizer.localizer import LoadedMap
+from localizer.loaded_map import LoadedMap
 from localizer.lookalikes import alike_by_appearance, is_counterpart, partners_of
 
 MAX_QUERIES = 60

@@ -1,23 +1,18 @@
-"""The localizer: a loaded map, the evidence of one panorama, and the belief over rooms.
+"""The localizer: the evidence of one panorama, and the belief over rooms.
 
-:class:`LoadedMap` is everything the localizer reads from the map database once at start-up
-(one detector's fingerprints stacked with their rays, the retrieval index, the places and the
-room graph), built from the :class:`mapdb.records.MapSnapshot` that ``mapdb.loading`` reads.
-:class:`Localizer` turns a panorama into evidence (extraction, retrieval, verification) and
-keeps the Bayes filter over rooms. Both hold no open database handle.
+:class:`Localizer` turns a panorama into evidence (extraction, retrieval, verification) against
+a :class:`~localizer.loaded_map.LoadedMap` and keeps the Bayes filter over rooms. It holds no
+open database handle.
 """
 
 from __future__ import annotations
 
 import time
-from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from pathlib import Path
 
 import cv2
-import networkx as nx
 import numpy as np
 
 from localizer.belief import (
@@ -37,6 +32,7 @@ from localizer.evidence import (
 )
 from localizer.features import extract_with_camera, matching_overrides
 from localizer.likelihood import Likelihood, RatioLikelihood, room_inliers, room_likelihood
+from localizer.loaded_map import LoadedMap
 from localizer.lookalikes import (
     EXACT_COUNTERPART_SHARE,
     lookalike_groups,
@@ -44,16 +40,9 @@ from localizer.lookalikes import (
     twin_counts,
 )
 from localizer.policy import PlaceSimilarity
-from localizer.retrieval import PlaceIndex, Shortlister
 from localizer.robot_protocol import Pose2D
-from localizer.routes import leg_graph
 from localizer.visual_homing import same_spot
-from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, Place, PlaceStore
-
-# From this many places (twice the default shortlist) the index pays: verifying all 30 places of
-# a 30-place map took 159 ms per query against 55 ms for the shortlist of 10 at 100 places
-# (benchmarks/bench_real_resolution.py); below it there is little to leave out.
-INDEX_MIN_PLACES = 20
+from mapdb.records import Fingerprint
 
 HOMED_ONE_PLACE_RATIO = 3.0
 """A frame taken where the robot homed to the one place of a room without a known look-alike
@@ -88,8 +77,9 @@ class LocalizerConfig:
 
     ``detector``: the extraction preset the map was built with (``sift``, ``mser``, ...).
     ``use_index``: shortlist places with the retrieval index before verification (``None``:
-    when the map has at least ``INDEX_MIN_PLACES`` places). ``camera``: the model of the
-    panoramas to localize (:mod:`localizer.cameras`; ``auto`` by their size).
+    when the map has at least :data:`~localizer.loaded_map.INDEX_MIN_PLACES` places).
+    ``camera``: the model of the panoramas to localize (:mod:`localizer.cameras`; ``auto`` by
+    their size).
     ``stay_probability``: per move, the chance of staying in the same room (the prediction
     along the room graph). ``likelihood``: how a frame's evidence weighs the rooms (None: the
     map's calibration, else :class:`~localizer.likelihood.RatioLikelihood`'s defaults); its
@@ -119,106 +109,6 @@ class LocalizerConfig:
                 "passive_anywhere_probability must be in [0, 1], got "
                 f"{self.passive_anywhere_probability!r}"
             )
-
-
-@dataclass(frozen=True, eq=False)
-class LoadedMap:
-    """One detector's view of the map, ready to localize against: its places' fingerprints (a
-    :class:`~mapdb.records.PlaceStore`: stacked in memory, or read from the map on demand), the
-    places, rooms, room graph, the retrieval index and the likelihood calibrated on the map
-    (None: not calibrated). Built from a :class:`mapdb.records.MapSnapshot`; holds no open
-    database."""
-
-    path: Path
-    table: PlaceStore
-    places: tuple[Place, ...]
-    rooms: tuple[str, ...]
-    edges: tuple[tuple[str, str], ...]
-    index: Shortlister | None
-    likelihood: RatioLikelihood | None = None
-
-    @classmethod
-    def from_snapshot(
-        cls,
-        snapshot: MapSnapshot,
-        use_index: bool | None = None,
-        index: Shortlister | None = None,
-    ) -> LoadedMap:
-        """The loaded map of ``snapshot`` with ``index`` (one over its places in order, e.g. a
-        :class:`~localizer.retrieval.CompactPlaceIndex` for a store on disk), else (with
-        ``use_index``; ``None``: from ``INDEX_MIN_PLACES`` places) a FLANN
-        :class:`~localizer.retrieval.PlaceIndex` built over a table in memory."""
-        table = snapshot.table
-        if index is not None and index.n_places != len(table.place_ids):
-            raise ValueError(
-                f"the index holds {index.n_places} places, the map {snapshot.path} "
-                f"{len(table.place_ids)}"
-            )
-        if index is None:
-            if use_index is None:
-                use_index = len(table.place_ids) >= INDEX_MIN_PLACES
-            if use_index and not isinstance(table, FingerprintTable):
-                raise ValueError("a map read from disk needs its compact index")
-            if use_index:
-                assert isinstance(table, FingerprintTable)
-                index = PlaceIndex.build(table)
-        return cls(
-            path=snapshot.path,
-            table=table,
-            places=snapshot.places,
-            rooms=snapshot.rooms,
-            edges=snapshot.edges,
-            index=index,
-            likelihood=(
-                None
-                if snapshot.likelihood is None
-                else RatioLikelihood.from_json(snapshot.likelihood)
-            ),
-        )
-
-    @cached_property
-    def places_per_room(self) -> Counter[str]:
-        """How many places of each room the table holds (a room without any: 0)."""
-        return Counter(self.table.rooms)
-
-    @cached_property
-    def legs(self) -> nx.Graph:
-        """The places joined by the legs they were recorded on, and the legs where they pass
-        each other: the graph recorded routes are found in (see
-        :func:`localizer.routes.leg_graph`)."""
-        return leg_graph(self.places)
-
-    @cached_property
-    def _index_of(self) -> dict[int, int]:
-        return {int(place_id): i for i, place_id in enumerate(self.table.place_ids)}
-
-    @property
-    def image_size_px(self) -> tuple[int, int]:
-        """``(width, height)`` of the map's panoramas (of its first place)."""
-        width, height = self.table.image_sizes_px[0]
-        return int(width), int(height)
-
-    def fingerprint(self, place_id: int) -> Fingerprint:
-        """The stored fingerprint of place ``place_id``; ``KeyError`` naming it if absent."""
-        return self.table.fingerprint(self.table_index(place_id))
-
-    def keypoints(self, place_id: int) -> int:
-        """How many keypoints place ``place_id`` has (read from memory); ``KeyError`` if absent."""
-        return int(self.table.keypoint_counts[self.table_index(place_id)])
-
-    def place(self, place_id: int) -> Place:
-        """The place with id ``place_id``; ``KeyError`` naming it if it is not in the map."""
-        for place in self.places:
-            if place.id == place_id:
-                return place
-        raise KeyError(f"place {place_id} is not in the map {self.path}")
-
-    def table_index(self, place_id: int) -> int:
-        """The index of place ``place_id`` in :attr:`table`; ``KeyError`` naming it if absent."""
-        try:
-            return self._index_of[int(place_id)]
-        except KeyError:
-            raise KeyError(f"place {place_id} is not in the map {self.path}") from None
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from localizer.features import (
     params_from_preset,
 )
 from localizer.likelihood import RatioLikelihood
-from localizer.localizer import LoadedMap
+from localizer.loaded_map import LoadedMap
 from mapdb.build import Status, build_map
 from mapdb.database import MapDatabase
 from mapdb.dataset import MANIFEST_NAME, read_edges, read_manifest

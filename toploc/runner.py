@@ -34,7 +34,8 @@ from typing import Any
 
 from localizer.active import ActiveParams, ActiveResult, localize_actively
 from localizer.belief import RoomBelief
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import HomingResult
 

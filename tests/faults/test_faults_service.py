@@ -15,7 +15,8 @@ from bus_helpers import ROBOT_ID, wait_for
 from robot_helpers import RobotWrapper
 
 from localizer.belief import BeliefFilter
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot

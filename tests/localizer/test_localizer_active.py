@@ -12,7 +12,8 @@ from robot_helpers import RobotWrapper
 from localizer.active import ENDINGS, ActiveParams, localize_actively, top_two_alike
 from localizer.belief import LocalizationState, RoomBelief
 from localizer.last_looks import way_in_step
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from localizer.looking_elsewhere import matched_bearing_rad, step_away_if_stuck
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from localizer.visual_homing import CANCELLED, HomingResult, StepParams, drive_home

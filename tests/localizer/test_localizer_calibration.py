@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from localizer.calibration import calibrate, query_places
 from localizer.likelihood import RatioLikelihood
-from localizer.localizer import LoadedMap
+from localizer.loaded_map import LoadedMap
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot
 from toploc.maps import calibrate_map, load_map

@@ -21,7 +21,8 @@ from localizer.features import (
     extract_with_camera,
     matching_overrides,
 )
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from mapdb.database import MapDatabase
 from mapdb.records import Fingerprint, FingerprintTable, MapSnapshot, NewPlace, Place
 from robot.photo_library import load_photo

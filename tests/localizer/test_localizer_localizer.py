@@ -13,7 +13,8 @@ from localizer.belief import LocalizationState
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
 from localizer.likelihood import RatioLikelihood
-from localizer.localizer import PARTIAL_VIEW_RATIO, LoadedMap, Localizer, to_grey
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import PARTIAL_VIEW_RATIO, Localizer, to_grey
 from localizer.robot_protocol import Pose2D
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot

@@ -20,7 +20,8 @@ from localizer.belief import LocalizationState
 from localizer.calibration import calibrate
 from localizer.cameras import CameraSpec
 from localizer.features import extract_with_camera
-from localizer.localizer import LoadedMap, Localizer, LocalizerConfig
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer, LocalizerConfig
 from localizer.robot_protocol import Pose2D
 from mapdb.records import FingerprintTable, MapSnapshot, Place
 from robot.photo_library import load_photo, photo_room

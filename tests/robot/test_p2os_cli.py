@@ -15,7 +15,8 @@ from click.testing import CliRunner
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from localizer.visual_homing import HomingParams, HomingResult, drive_home
 from mapdb.database import MapDatabase
 from mapdb.loading import load_snapshot

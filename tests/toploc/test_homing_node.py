@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 from bus_helpers import free_endpoint, wait_for
 
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult, Pose2D, Robot
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera

@@ -16,7 +16,8 @@ from click.testing import CliRunner
 from robot_helpers import RobotWrapper
 
 from localizer.active import ENDINGS
-from localizer.localizer import LoadedMap, Localizer
+from localizer.loaded_map import LoadedMap
+from localizer.localizer import Localizer
 from localizer.robot_protocol import Pose2D
 from mapdb.loading import load_snapshot
 from robot.render import PanoramaCamera
