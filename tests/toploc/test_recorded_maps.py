@@ -610,11 +610,12 @@ def test_a_way_into_the_rival_that_does_not_arrive_starts_the_belief_afresh(driv
     assert after.top[1] == pytest.approx(1.0 / len(after.ranked()))  # uniform again
 
 
-def test_a_way_back_that_held_keeps_the_belief_though_the_start_is_not_reached(driven):
+def test_a_way_back_that_held_tells_the_check_though_the_start_is_not_reached(driven):
     """A robot in office_a checks office_a by its route into the corridor and comes back
     through the views it took on the way out, but its last homing, to the start place's view,
-    does not arrive: it stands at the first view it took, in the room it left, so the belief
-    stands (nothing folded in, not started afresh)."""
+    does not arrive: it stands at the first view it took, in the room it left, so the check
+    tells about that room (office_a's odds multiplied by the check's ratio; not started
+    afresh)."""
     case = _OfficeACheck(driven)
     homed: list[int] = []
 
@@ -626,9 +627,12 @@ def test_a_way_back_that_held_keeps_the_belief_though_the_start_is_not_reached(d
 
     check, homed_to = case.run(home)
     assert check.started and check.confirmed
-    assert (check.back_room, check.afresh, homed_to) == (None, False, None)
+    assert (check.back_room, check.afresh, homed_to) == ("office_a", False, None)
     assert case.robot.true_room() == "office_a"
-    assert case.localizer.belief().ranked() == pytest.approx(case.before.ranked())
+    after = case.localizer.belief()
+    ratio = odds(after, "office_a", "office_b") / odds(case.before, "office_a", "office_b")
+    params = RouteCheckParams()  # into the corridor office_b opens onto too: the hall's rates
+    assert ratio == pytest.approx(params.hall_route_hit_rate / params.hall_route_false_rate)
 
 
 class FoggedRobot(RobotWrapper):
