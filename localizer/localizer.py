@@ -309,12 +309,13 @@ class Localizer:
     def doubt(self, room: str) -> RoomBelief:
         """Take back what frames told for ``room``: its probability is brought down to the
         likeliest other room's, and until :meth:`reset` a frame favours it no more than that
-        room. For a room that is :meth:`alone` whose check by a route did not arrive: a frame
-        that looks like it may come from a twin the map does not know (world seed 30's house,
-        one place per room: a robot in bedroom_b whose check of bedroom_a missed, 0.81, looked
-        twice more near the spot of bedroom_a's place in its own bedroom and ended sure of
-        bedroom_a, 1.0; on seed 31's, a first look 0.999 sure of the twin outlasted the miss).
-        Returns the belief."""
+        room. For a room that is :meth:`alone` whose check by a route did not arrive, or whose
+        one place the robot could not home to: a frame that looks like it may come from a twin
+        the map does not know, or from a room whose walls look like a part of it (world seed
+        30's house, one place per room: a robot in bedroom_b whose check of bedroom_a missed,
+        0.81, looked twice more near the spot of bedroom_a's place in its own bedroom and ended
+        sure of bedroom_a, 1.0; on seed 31's, a first look 0.999 sure of the twin outlasted the
+        miss). Returns the belief."""
         if room not in self.map.rooms:
             raise ValueError(f"no room {room!r} in the map {self.map.path}")
         self.doubted = self.doubted | {room}

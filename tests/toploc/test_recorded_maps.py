@@ -333,6 +333,32 @@ def test_a_robot_in_a_twin_the_map_does_not_know_checks_the_other_once_the_check
     assert result.final.top[0] == "office_a" == robot.true_room()
 
 
+def test_a_room_of_one_place_the_robot_cannot_home_to_is_doubted(one_place_twins_unknown):
+    """A robot in office_a whose first look favours office_b (its twin, unknown to the map)
+    cannot home to office_b's one place, so the check cannot start: what the frames said for
+    office_b is taken back (they may have come from a room that looks like it), and later
+    frames do not favour it over the next room."""
+    loaded = one_place_twins_unknown
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=4, camera=CAMERA)
+    localizer = Localizer(loaded)
+    assert localizer.update(localizer.observe(robot.capture().image)).top[0] == "office_b"
+    start = next(p for p in loaded.places if p.room == "office_b")
+    route = route_out(loaded.legs, loaded.places, start.id, {"office_a", "office_b"}, 20.0)
+    assert route is not None
+
+    def home(_place_id: int) -> HomingResult:
+        return HomingResult(False, 1, 0.4, "converged", localizer.extract(robot.capture().image))
+
+    params = ActiveParams()
+    check, *_ = check_route(
+        localizer, robot, home, start, route, None, params.routes, params.homing
+    )
+    assert not check.started
+    assert localizer.doubted == {"office_b"}
+    after = localizer.belief().as_dict()
+    assert after["office_b"] <= max(p for room, p in after.items() if room != "office_b")
+
+
 def test_checks_of_one_room_that_all_miss_count_once_and_leave_the_twins_even(driven):
     """A robot in office_a whose every route ends short of the route's end place (a door its
     homing does not pass): the misses come from one cause, not from chance each time."""
