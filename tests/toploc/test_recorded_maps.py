@@ -15,6 +15,7 @@ from robot_helpers import RobotWrapper
 
 from localizer.active import ActiveParams, localize_actively
 from localizer.belief import LocalizationState, StateThresholds, top_two_ratio
+from localizer.loaded_map import LoadedMap
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult
 from localizer.route_checks import RouteCheckParams, check_route
@@ -296,16 +297,26 @@ def test_map_info_says_a_twins_drive_beyond_the_hall_tells_them_apart(driven_to_
 
 
 @pytest.fixture(scope="module")
-def one_place_twins_unknown(tmp_path_factory):
-    """The corridor and twin offices, one place each, recorded on one drive (seed 3), loaded as
-    if the calibration had not found the twins (one place each gives it little to compare:
-    a recorded house's bedrooms verified each other at 4-5 spread inliers, as chance does)."""
+def one_place(tmp_path_factory):
+    """The corridor and twin offices, one place each, recorded on one drive (seed 3)."""
     db = tmp_path_factory.mktemp("one_place") / "map.db"
-    record_map(make_world("building"), 1, 3, db, rooms=ROOMS, camera=CAMERA, drive=True)
+    places = record_map(make_world("building"), 1, 3, db, rooms=ROOMS, camera=CAMERA, drive=True)
+    return db, places
+
+
+def twins_unknown(db) -> LoadedMap:
+    """The map at ``db`` loaded as if the calibration had not found the twins (one place each
+    gives it little to compare: a recorded house's bedrooms verified each other at 4-5 spread
+    inliers, as chance does)."""
     loaded = load_map(db)
     assert loaded.likelihood is not None
     unknown = replace(loaded.likelihood, lookalikes=(), counterparts=())
     return replace(loaded, likelihood=unknown)
+
+
+@pytest.fixture(scope="module")
+def one_place_twins_unknown(one_place):
+    return twins_unknown(one_place[0])
 
 
 def test_a_room_of_one_place_is_checked_by_a_route_before_the_robot_is_sure_of_it(
@@ -548,13 +559,15 @@ def test_a_check_into_a_hall_that_repeats_is_told_by_the_drive_on_beyond_it(driv
 
 class _OfficeACheck:
     """A robot in office_a about to check office_a by its route into the corridor (the
-    ``driven`` map), office_b its rival, after one look; the test fakes the homings, and
+    ``driven`` map, or another recorded on one drive; ``unknown_twins``: loaded as if the
+    calibration had not paired the offices), office_b its rival, after one look; the test fakes
+    the homings, and
     :meth:`carry` is a perfect one (the robot put at the place's true pose)."""
 
-    def __init__(self, driven) -> None:
+    def __init__(self, driven, unknown_twins: bool = False) -> None:
         db, recorded = driven
         self.truth = {place.place_id: place.true_pose for place in recorded}
-        self.loaded = load_map(db)
+        self.loaded = twins_unknown(db) if unknown_twins else load_map(db)
         self.localizer = Localizer(self.loaded)
         world = make_world("building")
         self.robot = SimulatedRobot.kidnapped(world, "office_a", seed=0, camera=CAMERA)
@@ -659,6 +672,28 @@ def test_a_way_back_that_held_tells_the_check_though_the_start_is_not_reached(dr
     ratio = odds(after, "office_a", "office_b") / odds(case.before, "office_a", "office_b")
     params = RouteCheckParams()  # into the corridor office_b opens onto too: the hall's rates
     assert ratio == pytest.approx(params.hall_route_hit_rate / params.hall_route_false_rate)
+
+
+def test_a_missed_check_of_a_room_of_one_place_doubts_it_though_the_start_is_not_reached(
+    one_place,
+):
+    """A room of one place and no known look-alike whose check misses is doubted (its looks may
+    have been an unknown twin's) when the way back holds, whether or not the last homing, to
+    the start place's view, arrives: later frames favour it no more than the next room."""
+    case = _OfficeACheck(one_place, unknown_twins=True)
+    assert case.localizer.alone("office_a")
+    homed: list[int] = []
+
+    def home(place_id: int) -> HomingResult:
+        homed.append(place_id)
+        if place_id == case.start.id and homed.count(place_id) == 1:
+            return case.carry(place_id)  # the start: at once
+        return HomingResult(False, 1, 0.1, "converged", case.view())  # the end, and back
+
+    check, homed_to = case.run(home)
+    assert check.started and not check.confirmed
+    assert (check.back_room, homed_to) == ("office_a", None)
+    assert case.localizer.doubted == {"office_a"}
 
 
 class FoggedRobot(RobotWrapper):
