@@ -106,6 +106,7 @@ from toploc.bus.session import (
     ensure_unique_node,
     open_session,
     open_when_up,
+    token_present,
 )
 from toploc.bus.subscriptions import UNDECLARE_RETRY_S, subscribe, undeclare_all
 
@@ -183,5 +184,6 @@ __all__ = [
     "site_alive_key",
     "site_key",
     "subscribe",
+    "token_present",
     "undeclare_all",
 ]

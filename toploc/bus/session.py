@@ -52,11 +52,7 @@ def ensure_unique_node(
     ``token_key``, a site map's) is already on the bus (waits at most ``timeout_s`` seconds; see
     the module docstring for the race). Call it before the node declares anything."""
     token_key = token_key or alive_key(robot_id, node)
-    try:
-        replies = list(session.liveliness().get(token_key, timeout=timeout_s))
-    except zenoh.ZError as error:
-        raise BusError(f"{token_key}: liveliness query failed: {error}") from error
-    if any(reply.ok is not None for reply in replies):
+    if token_present(session, token_key, timeout_s):
         what, option = (
             (f"robot id {robot_id!r}", "--robot-id")
             if token_key == alive_key(robot_id, node)
@@ -65,6 +61,16 @@ def ensure_unique_node(
         raise BusIdInUse(
             f"{what} already has a {node} node on the bus ({token_key}); choose another {option}"
         )
+
+
+def token_present(session: zenoh.Session, token_key: str, timeout_s: float) -> bool:
+    """Whether a liveliness token matching ``token_key`` is on the bus, as a query that waits at
+    most ``timeout_s`` seconds finds; :class:`BusError` naming the key if the query fails."""
+    try:
+        replies = list(session.liveliness().get(token_key, timeout=timeout_s))
+    except zenoh.ZError as error:
+        raise BusError(f"{token_key}: liveliness query failed: {error}") from error
+    return any(reply.ok is not None for reply in replies)
 
 
 def connected(session: zenoh.Session) -> bool:

@@ -271,10 +271,9 @@ class Ros2Bridge:
             return True
         key = bus.alive_key(self.robot_id, LOCALIZER_NODE)
         try:
-            replies = self._toploc_session.liveliness().get(key, timeout=TOKEN_QUERY_TIMEOUT_S)
-            return any(reply.ok is not None for reply in replies)
-        except zenoh.ZError as error:
-            _log.warning("could not ask toploc's bus for %s: %s", key, error)
+            return bus.token_present(self._toploc_session, key, TOKEN_QUERY_TIMEOUT_S)
+        except bus.BusError as error:
+            _log.warning("could not ask toploc's bus for the localizer's token: %s", error)
             return False
 
     def _localize(self, active: bool) -> Any:
