@@ -67,8 +67,12 @@ the homings of seed 87's building trial 18, and measured main once on seed 91 (r
 92; K = 1 and 2), none of whose trials it looked into, and on seed 93's building (record seed
 94; K = 1 and 2), whose one-place trial 1 it then traced and wrote a change on (a way back that
 held keeps the belief), judged on seed 91's four runs again (all the same: the case did not
-arise). World seeds 95 and up have not been run at all; seed 91, and seed 93's building with
-two places per room, may judge a change too.
+arise). Session 43 measured main once on world seeds 95 (K = 1 and 2), 97 and 99 (K = 1;
+record seeds one up), wrote its fold of a held way back on seed 93's building (K = 1), its
+doubt of an unreachable one-place room on seed 95's building (K = 1, trial 4) and its doubt
+after a held miss on seed 97's building (K = 1, trial 15), and judged them on seeds 91, 95's
+house and 99 (K = 1). World seeds 101 and up have not been run at all; seed 99 (K = 2), and
+seeds 91 and 93 with two places per room, may judge a change too.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
