@@ -7,23 +7,21 @@ this prints:
 - the eq. 5.6 score of ``thesis`` (true headings), of ``best``, and of the verified axis with
   the sign the truth would give (``oracle sign``: how much a better sign could gain; pairs
   without geometry take the matched ALV);
-- on the pairs whose axis lies within 30° of the truth (either sign), how often each of
-  ``best``'s sign votes is right: the cheirality above the floor, the matched ALV, the ALV of
-  all features turned by the pose's yaw and the elevations' change
-  (:func:`localizer.visual_homing.signed_pose_direction_rad`);
-- the median error of the verified pose's yaw against the headings' difference (degrees);
-- the score of ``best`` with the cheirality vote weighted by each inlier's parallax
-  (``parallax-weighted``: inliers near the axis, whose parallax is within the noise, count
-  less; with the three votes of before session 28), a variant measured here and not adopted;
-- how often the elevation vote (:func:`localizer.verification.elevation_vote`, whatever its
-  t-statistic) is right, and the score of ``best`` without it (``without the elevation
-  vote``: the three votes of ``best`` before session 28).
+- the score of ``best`` without the keypoint sizes (``without sizes``: the distance vote from
+  the elevations alone, as on a map stored before schema version 5) and with the four votes
+  of sessions 28-43 (``four votes``: the elevations' vote counted as one of four, beside the
+  cheirality and the two ALVs, a tie going its way);
+- on the pairs whose axis lies within 30° of the truth (either sign), how often each sign
+  vote is right: the cheirality above the floor, the matched ALV, the ALV of all features
+  turned by the pose's yaw (:func:`localizer.visual_homing.signed_pose_direction_rad`), and
+  the distance vote (:func:`localizer.verification.distance_vote`) whatever its t-statistic
+  and where it counts (``counted``: from :data:`localizer.visual_homing.DISTANCE_VOTE_MIN_T`);
+- the median error of the verified pose's yaw against the headings' difference (degrees).
 
 With ``--per-pair``, also each pair whose ``best`` error exceeds the thesis's: the places'
 distance apart, the verification's inliers, the two methods' errors and the axis's, and each
-sign vote (+1: the axis as verified, -1: its opposite; the elevation vote with its
-t-statistic, counted only from :data:`localizer.visual_homing.ELEVATION_VOTE_MIN_T`) beside
-the sign the truth gives.
+sign vote (+1: the axis as verified, -1: its opposite; the distance vote with its
+t-statistic) beside the sign the truth gives.
 
 Run: ``python benchmarks/bench_homing_signs.py [--per-pair] DATASET [DATASET ...]``;
 docs/homing.md names the datasets it was run on.
@@ -41,15 +39,8 @@ from homing.alv import alv_from_bearings
 from homing.bearings import wrap_angle_rad
 from homing.home_directions import alv_home_directions_rad
 from homing.thesis.evaluation import pair_errors_deg, true_home_direction_rad
-from localizer.planar import triangulated_depths
-from localizer.verification import (
-    FLOOR_ELEVATION_DEG,
-    Verification,
-    cheirality_sign,
-    elevation_vote,
-    home_direction_rad,
-)
-from localizer.visual_homing import signed_pose_direction_rad
+from localizer.verification import cheirality_sign, distance_vote, home_direction_rad
+from localizer.visual_homing import DISTANCE_VOTE_MIN_T, signed_pose_direction_rad
 from toploc.evaluation.homing import (
     FeatureSettings,
     PairCache,
@@ -67,26 +58,6 @@ GOOD_AXIS_DEG = 30.0
 def score(errors_deg: np.ndarray) -> float:
     """Eq. 5.6: 1 - mean |error| / 180°, a pair without a direction counted as 90°."""
     return float(1.0 - np.mean(np.abs(np.where(np.isnan(errors_deg), 90.0, errors_deg))) / 180.0)
-
-
-def weighted_cheirality(v: Verification, rays_query: np.ndarray, rays_place: np.ndarray) -> int:
-    """The cheirality vote with each inlier above the floor weighted by its parallax (radians
-    between its two rays, the place's turned into the query frame); all inliers on a tie."""
-    if v.rotation is None or v.translation_dir is None or len(v.inlier_pairs) == 0:
-        return 0
-    x_query = rays_query[v.inlier_pairs[:, 0]]
-    x_place = rays_place[v.inlier_pairs[:, 1]] @ v.rotation.T
-    depth_place, depth_query = triangulated_depths(x_place, x_query, v.translation_dir)
-    front = (depth_place > 0) & (depth_query > 0)
-    behind = (depth_place < 0) & (depth_query < 0)
-    parallax = np.arccos(np.clip(np.einsum("ij,ij->i", x_place, x_query), -1.0, 1.0))
-    z_min = math.sin(math.radians(FLOOR_ELEVATION_DEG))
-    above = (x_query[:, 2] > z_min) & (x_place[:, 2] > z_min)
-    for keep in (above, np.ones_like(above)):
-        total = float(((front.astype(float) - behind) * parallax)[keep].sum())
-        if total != 0.0:
-            return 1 if total > 0 else -1
-    return 1
 
 
 def run(dataset: Path, per_pair: bool = False) -> None:
@@ -107,12 +78,13 @@ def run(dataset: Path, per_pair: bool = False) -> None:
     best_errors = errors(best)
     matched = _home_directions("matched-alv", places, cache, pairs)
     alvs = [alv_from_bearings(f.bearings_rad) for f in fingerprints]
-    oracle, weighted, without_elevation = best.copy(), best.copy(), best.copy()
+    oracle, without_sizes, four_votes = best.copy(), best.copy(), best.copy()
     votes: dict[str, list[bool]] = {
         "cheirality": [],
         "matched ALV": [],
         "ALV, pose yaw": [],
-        "elevation": [],
+        "distance": [],
+        "counted": [],
     }
     yaw_errors_deg: list[float] = []
     for k, (i, j) in enumerate(pairs.tolist()):
@@ -131,23 +103,28 @@ def run(dataset: Path, per_pair: bool = False) -> None:
             alv_rad = float(
                 alv_home_directions_rad(alvs[i][None], alvs[j][None], np.array([-v.yaw_rad]))[0]
             )
-        rough = [d for d in (matched[k], alv_rad) if math.isfinite(d)]
-        side = weighted_cheirality(v, cache.rays(i), cache.rays(j))
-        alvs_say = sum(side_of(d, axis) for d in rough)
-        total = side + alvs_say
-        flip = total < 0 or (total == 0 and side < 0)
-        weighted[k] = axis + math.pi if flip else axis
-        cheirality = cheirality_sign(v, cache.rays(i), cache.rays(j))
-        elevation, statistic = elevation_vote(v, cache.rays(i), cache.rays(j))
-        without_elevation[k] = signed_pose_direction_rad(
-            v, matched[k], alvs[i], alvs[j], cheirality
+        rays_i, rays_j = cache.rays(i), cache.rays(j)
+        cheirality = cheirality_sign(v, rays_i, rays_j)
+        sizes_i, sizes_j = (
+            fingerprints[i].keypoint_sizes_rad(),
+            fingerprints[j].keypoint_sizes_rad(),
         )
+        distance, statistic = distance_vote(v, rays_i, rays_j, sizes_i, sizes_j)
+        elevation, elevation_t = distance_vote(v, rays_i, rays_j)
+        elevation = elevation if abs(elevation_t) >= DISTANCE_VOTE_MIN_T else 0
+        without_sizes[k] = signed_pose_direction_rad(
+            v, matched[k], alvs[i], alvs[j], cheirality, elevation
+        )
+        rough = sum(side_of(d, axis) for d in (matched[k], alv_rad))
+        total = cheirality + elevation + rough
+        flip = total < 0 or (total == 0 and (elevation or cheirality) < 0)
+        four_votes[k] = axis + math.pi if flip else axis
         if per_pair and best_errors[k] > thesis[k]:
             print(
                 f"  {places[i].room} {i}->{j}: {np.hypot(*(positions[i] - positions[j])):.1f} m, "
                 f"{v.inliers} inliers; thesis {thesis[k]:.1f} deg, best {best_errors[k]:.1f} deg, "
                 f"axis {min(both):.1f} deg; truth {right_sign(both):+d}, cheirality "
-                f"{cheirality:+d}, elevation {elevation:+d} (t {statistic:.1f}), matched ALV "
+                f"{cheirality:+d}, distance {distance:+d} (t {statistic:.1f}), matched ALV "
                 f"{side_of(matched[k], axis):+d}, ALV with the pose's yaw "
                 f"{side_of(alv_rad, axis):+d}"
             )
@@ -155,17 +132,18 @@ def run(dataset: Path, per_pair: bool = False) -> None:
             continue
         right = right_sign(both)
         votes["cheirality"].append(cheirality == right)
-        if elevation != 0:
-            votes["elevation"].append(elevation == right)
+        if distance != 0:
+            votes["distance"].append(distance == right)
+            if abs(statistic) >= DISTANCE_VOTE_MIN_T:
+                votes["counted"].append(distance == right)
         for name, d in (("matched ALV", matched[k]), ("ALV, pose yaw", alv_rad)):
             if math.isfinite(d):
                 votes[name].append(side_of(d, axis) == right)
-    shares = ", ".join(f"{name} {np.mean(v):.0%}" for name, v in votes.items() if v)
+    shares = ", ".join(f"{name} {np.mean(v):.0%} of {len(v)}" for name, v in votes.items() if v)
     print(
         f"{dataset.name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
-        f"{score(best_errors):.3f}, oracle sign {score(errors(oracle)):.3f}, parallax-weighted "
-        f"{score(errors(weighted)):.3f}, without the elevation vote "
-        f"{score(errors(without_elevation)):.3f}; "
+        f"{score(best_errors):.3f}, oracle sign {score(errors(oracle)):.3f}, without sizes "
+        f"{score(errors(without_sizes)):.3f}, four votes {score(errors(four_votes)):.3f}; "
         f"yaw error median {np.median(yaw_errors_deg):.1f} deg; "
         f"{len(votes['cheirality'])} pairs with the axis within "
         f"{GOOD_AXIS_DEG:.0f} deg, votes right: {shares}"

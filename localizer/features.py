@@ -463,6 +463,7 @@ def extract(
         bearings_rad=bearing_rad_from_column(xy[index, 0], w),
         descriptors=descriptors[index],
         params=record,
+        keypoint_sizes_px=size[index].astype(np.float32),
         camera_model=camera,
     )
 

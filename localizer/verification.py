@@ -326,54 +326,69 @@ def cheirality_sign(
 
 ELEVATION_MIN_DEG = 3.0
 """Inliers nearer the horizon than this (degrees, in either panorama) give no distance ratio
-(:func:`elevation_vote`): their elevations' tangents are within the noise of zero."""
-ELEVATION_MIN_INLIERS = 5
-"""Fewer usable inliers give no elevation vote (:func:`elevation_vote`)."""
+from their elevations (:func:`distance_vote`): their tangents are within the noise of zero."""
+DISTANCE_MIN_INLIERS = 5
+"""Fewer inliers giving a distance ratio give no distance vote (:func:`distance_vote`)."""
 
 
-def elevation_vote(
+def distance_vote(
     verification: Verification,
     query_rays: np.ndarray,
     place_rays: np.ndarray,
+    query_sizes: np.ndarray | None = None,
+    place_sizes: np.ndarray | None = None,
     min_elevation_deg: float = FLOOR_ELEVATION_DEG,
 ) -> tuple[int, float]:
-    """The side of ``translation_dir``'s axis the place lies on, by how the inliers'
-    elevations change: +1 the translation as it is, -1 its opposite, 0 without a vote; and
-    the t-statistic of that vote (its sign is the vote's opposite; 0.0 without a vote).
+    """The side of ``translation_dir``'s axis the place lies on, by how far the inliers are
+    from each view: +1 the translation as it is, -1 its opposite, 0 without a vote; and the
+    t-statistic of that vote (its sign is the vote's opposite; 0.0 without a vote).
 
-    A point at height h above or below the camera, at horizontal distance d, is seen at an
-    elevation e with tan e = h / d: the ratio of its two tangents is the ratio of its two
-    distances, ``log(tan e_query / tan e_place) = log(d_place / d_query)``, and the points on
-    the side of the axis the place lies on are nearer the place. Each inlier above
-    ``min_elevation_deg`` (degrees) in both panoramas, at least :data:`ELEVATION_MIN_DEG` off
-    the horizon on one side of it in both, gives that log ratio times its ray's component
-    along the axis (query frame: the cosine of its bearing to the axis times that of its
-    elevation); their mean against its standard error is the
-    t-statistic. Where the cheirality of :func:`cheirality_sign` is weakest, at points near
-    the axis whose bearing barely changes, the distance changes most. Fewer than
-    :data:`ELEVATION_MIN_INLIERS` such inliers: no vote. Rays as for :func:`verify`.
+    Two things give the ratio of a point's two distances, ``log(d_place / d_query)``. Its
+    elevations: at height h above or below the camera and horizontal distance d it is seen at
+    tan e = h / d, so ``log(tan e_query / tan e_place)`` (inliers at least
+    :data:`ELEVATION_MIN_DEG` off the horizon, on one side of it in both). Its keypoint's sizes
+    (``query_sizes``, ``place_sizes``, one per row of the rays, in one unit for both, e.g.
+    :meth:`mapdb.records.Fingerprint.keypoint_sizes_rad`; None: not known): a feature seen
+    nearer is larger, ``log(size_query / size_place)``. The points on the side of the axis
+    the place lies on are nearer the place; each ratio of an inlier above ``min_elevation_deg``
+    (degrees) in both panoramas is weighted by its ray's component along the axis (query frame),
+    and their mean against its standard error is the t-statistic. Where the cheirality of
+    :func:`cheirality_sign` and the ALVs are weakest, at points near the axis whose bearing
+    barely changes, the distance changes most. The floor is left out: its repeating texture
+    matches a plank farther on (the rendered house). Fewer than
+    :data:`DISTANCE_MIN_INLIERS` inliers giving a ratio: no vote. Rays as for :func:`verify`.
     """
     t = verification.translation_dir
     if t is None or len(verification.inlier_pairs) == 0 or np.hypot(t[0], t[1]) < 1e-6:
         return 0, 0.0
-    z_query = query_rays[verification.inlier_pairs[:, 0], 2]
-    z_place = place_rays[verification.inlier_pairs[:, 1], 2]
+    rows_query, rows_place = verification.inlier_pairs[:, 0], verification.inlier_pairs[:, 1]
+    z_query, z_place = query_rays[rows_query, 2], place_rays[rows_place, 2]
+    z_floor = math.sin(math.radians(min_elevation_deg))
+    above = (z_query > z_floor) & (z_place > z_floor)
     tan_query = z_query / np.sqrt(np.maximum(1.0 - z_query**2, 1e-12))
     tan_place = z_place / np.sqrt(np.maximum(1.0 - z_place**2, 1e-12))
-    z_floor = math.sin(math.radians(min_elevation_deg))
     tan_min = math.tan(math.radians(ELEVATION_MIN_DEG))
-    usable = (
-        (z_query > z_floor)
-        & (z_place > z_floor)
+    by_elevation = (
+        above
         & (np.abs(tan_query) > tan_min)
         & (np.abs(tan_place) > tan_min)
         & (np.sign(tan_query) == np.sign(tan_place))
     )
-    if int(usable.sum()) < ELEVATION_MIN_INLIERS:
+    ratios = [np.log(np.abs(tan_query[by_elevation]) / np.abs(tan_place[by_elevation]))]
+    sides = [by_elevation]
+    giving = by_elevation
+    if query_sizes is not None and place_sizes is not None:
+        size_query = np.asarray(query_sizes, dtype=float)[rows_query]
+        size_place = np.asarray(place_sizes, dtype=float)[rows_place]
+        by_size = above & (size_query > 0) & (size_place > 0)
+        ratios.append(np.log(size_query[by_size] / size_place[by_size]))
+        sides.append(by_size)
+        giving = giving | by_size
+    if int(giving.sum()) < DISTANCE_MIN_INLIERS:
         return 0, 0.0
     axis = np.asarray(t[:2], dtype=float) / float(np.hypot(t[0], t[1]))
-    side = query_rays[verification.inlier_pairs[usable, 0], :2] @ axis
-    terms = np.log(np.abs(tan_query[usable]) / np.abs(tan_place[usable])) * side
+    along = query_rays[rows_query, :2] @ axis
+    terms = np.concatenate([r * along[m] for r, m in zip(ratios, sides, strict=True)])
     spread = float(terms.std(ddof=1))
     if spread == 0.0 or float(terms.mean()) == 0.0:
         return 0, 0.0

@@ -16,10 +16,10 @@ to go but is not metres). Three variants:
   :func:`homing.alv.matched_home_vector`.
 - ``"pose"``: the direction from the relative pose that the localizer's verification finds on
   the same descriptor matches (:func:`localizer.verification.verify`): the axis of its
-  translation, which is precise, with the sign most of four votes give: the pose's
-  cheirality counted on the inliers above the floor, the change of the inliers' elevations
-  where it is significant, the matched ALV and the ALV of all features with the pose's yaw as
-  the compass
+  translation, which is precise, with the sign that the inliers' change of distance gives
+  where it is significant (their elevations and their keypoints' sizes), else the sign most
+  of three votes give: the pose's cheirality counted on the inliers above the floor, the
+  matched ALV and the ALV of all features with the pose's yaw as the compass
   (:func:`signed_pose_direction_rad`; ``toploc eval homing --method pose-vote``). The step
   length and the arrival test are the matched ALV's, as for "best"; without a translation
   axis the step is "best"'s. The default: the method ``toploc eval homing --method best``
@@ -71,7 +71,7 @@ from localizer.matching import match_descriptors
 from localizer.verification import (
     Verification,
     cheirality_sign,
-    elevation_vote,
+    distance_vote,
     home_direction_rad,
     verify,
 )
@@ -80,10 +80,10 @@ from mapdb.records import Fingerprint
 if TYPE_CHECKING:  # the protocol only: localizer does not depend on a robot implementation
     from localizer.robot_protocol import Robot
 
-ELEVATION_VOTE_MIN_T = 2.0
-"""The elevation vote (:func:`localizer.verification.elevation_vote`) counts among the "pose"
-variant's sign votes when its t-statistic is at least this (chosen on bare houses 1.5-3 m,
-the tiled square and building rooms and an equirect corridor: docs/homing.md)."""
+DISTANCE_VOTE_MIN_T = 2.0
+"""The distance vote (:func:`localizer.verification.distance_vote`) sets the "pose" variant's
+sign when its t-statistic is at least this (chosen on bare houses 1.5-3 m, the tiled square
+and building rooms and corridors: docs/homing.md)."""
 
 HomingVariant = Literal["thesis", "best", "pose"]
 VARIANTS: tuple[str, ...] = ("thesis", "best", "pose")
@@ -207,13 +207,21 @@ def _best_step(
     return HomeStep(home, shift, len(pairs), parallax)
 
 
-def counted_elevation_vote(
-    verification: Verification, rays_here: np.ndarray, rays_home: np.ndarray
+def counted_distance_vote(
+    verification: Verification,
+    rays_here: np.ndarray,
+    rays_home: np.ndarray,
+    sizes_here_rad: np.ndarray | None,
+    sizes_home_rad: np.ndarray | None,
 ) -> int:
-    """The elevation vote of :func:`localizer.verification.elevation_vote` (query: here, place:
-    home) where its t-statistic is at least :data:`ELEVATION_VOTE_MIN_T`, else 0."""
-    vote, statistic = elevation_vote(verification, rays_here, rays_home)
-    return vote if abs(statistic) >= ELEVATION_VOTE_MIN_T else 0
+    """The distance vote of :func:`localizer.verification.distance_vote` (query: here, place:
+    home; the keypoint sizes as angles, :meth:`mapdb.records.Fingerprint.keypoint_sizes_rad`,
+    None where not known) where its t-statistic is at least :data:`DISTANCE_VOTE_MIN_T`,
+    else 0."""
+    vote, statistic = distance_vote(
+        verification, rays_here, rays_home, sizes_here_rad, sizes_home_rad
+    )
+    return vote if abs(statistic) >= DISTANCE_VOTE_MIN_T else 0
 
 
 def signed_pose_direction_rad(
@@ -222,23 +230,24 @@ def signed_pose_direction_rad(
     alv_here: np.ndarray,
     alv_home: np.ndarray,
     cheirality: int,
-    elevation: int = 0,
+    distance: int = 0,
 ) -> float:
     """The home direction of the "pose" variant (rad, current robot frame, (-pi, pi]).
 
     The axis of ``verification``'s translation (query: here, place: home) with the sign that
-    most of four votes give: ``cheirality`` (+1: the translation as it is, -1: its opposite;
-    :func:`localizer.verification.cheirality_sign`), ``elevation`` (the same, from how the
-    inliers' elevations change, 0 for none: :func:`counted_elevation_vote`), ``matched_rad``
-    (the matched-ALV direction; no vote if NaN) and the ALV home vector of all features
-    (``alv_here``, ``alv_home`` (2,), each in its own robot frame) rotated by the pose's yaw;
-    an ALV votes for the side of the axis it lies on. Each vote fails somewhere else: the
-    cheirality where a repeating floor texture outvotes the walls or the points lie near the
-    axis, the elevations where few points stand off the horizon, the ALV of all features
-    where they are unevenly spread (the tiled square room), the matched ALV with few
-    matches. A tie goes the elevation's way, else the cheirality's. Without a translation
-    axis: the circular mean of the rough directions there are (the matched ALV alone when the
-    pose has no yaw); NaN if none.
+    ``distance`` gives (+1: the translation as it is, -1: its opposite, 0: none; the inliers'
+    change of distance where it is significant: :func:`counted_distance_vote`), else the sign
+    that most of three votes give: ``cheirality`` (the same signs;
+    :func:`localizer.verification.cheirality_sign`), ``matched_rad`` (the matched-ALV
+    direction; no vote if NaN) and the ALV home vector of all features (``alv_here``,
+    ``alv_home`` (2,), each in its own robot frame) rotated by the pose's yaw; an ALV votes for
+    the side of the axis it lies on, and a tie goes the cheirality's way. The three fail where
+    the points lie near the axis and their bearings barely change (along a hall), where the
+    distances change most; each fails somewhere else too: the cheirality where a repeating floor
+    texture outvotes the walls, the ALV of all features where they are unevenly spread (the
+    tiled square room), the matched ALV with few matches. Without a translation axis: the
+    circular mean of the rough directions there are (the matched ALV alone when the pose has
+    no yaw); NaN if none.
     """
     alv_dir_rad = math.nan
     if math.isfinite(verification.yaw_rad):
@@ -252,9 +261,12 @@ def signed_pose_direction_rad(
     axis_rad = home_direction_rad(verification)
     if math.isnan(axis_rad):
         return float(mean_direction_rad(matched_rad, alv_dir_rad))
-    rough = [d for d in (matched_rad, alv_dir_rad) if math.isfinite(d)]
-    votes = cheirality + elevation + sum(float(np.sign(math.cos(d - axis_rad))) for d in rough)
-    flip = votes < 0 or (votes == 0 and (elevation or cheirality) < 0)
+    if distance:
+        flip = distance < 0
+    else:
+        rough = [d for d in (matched_rad, alv_dir_rad) if math.isfinite(d)]
+        votes = cheirality + sum(float(np.sign(math.cos(d - axis_rad))) for d in rough)
+        flip = votes < 0 or (votes == 0 and cheirality < 0)
     return float(wrap_angle_rad(axis_rad + math.pi)) if flip else axis_rad
 
 
@@ -273,7 +285,13 @@ def _pose_step(
         alv_from_bearings(current.bearings_rad),
         alv_from_bearings(goal.bearings_rad),
         cheirality_sign(verification, rays_here, rays_goal),
-        counted_elevation_vote(verification, rays_here, rays_goal),
+        counted_distance_vote(
+            verification,
+            rays_here,
+            rays_goal,
+            current.keypoint_sizes_rad(),
+            goal.keypoint_sizes_rad(),
+        ),
     )
     home = matched.length * np.array([math.cos(direction), math.sin(direction)])
     shift = -verification.yaw_rad if shift_rad is None else shift_rad

@@ -2,7 +2,8 @@
 and between a :class:`Leg` and a ``legs`` row.
 
 Arrays are stored as raw little-endian blobs, so reading them back is one ``np.frombuffer`` each
-(no parsing): keypoints ``(n, 2)`` float32, bearings ``(n,)`` float64, descriptors ``(n, d)``.
+(no parsing): keypoints ``(n, 2)`` float32, bearings ``(n,)`` float64, descriptors ``(n, d)``,
+the keypoints' sizes ``(n,)`` float32 (NULL where not known).
 Descriptors are stored as ``uint8`` (``descriptor_dtype = 'u1'``, a quarter of the size) when
 every value is an integer in [0, 255], as OpenCV's SIFT descriptors are, else as float32
 (``'f4'``); both load back as the same float32 values. The row also carries ``n_keypoints`` and
@@ -24,6 +25,7 @@ from mapdb.records import Fingerprint, Leg, ParamValue
 KEYPOINTS_DTYPE = np.dtype("<f4")
 BEARINGS_DTYPE = np.dtype("<f8")
 DESCRIPTORS_DTYPE = np.dtype("<f4")
+SIZES_DTYPE = np.dtype("<f4")
 DESCRIPTOR_STORAGE: dict[str, np.dtype[Any]] = {"u1": np.dtype("u1"), "f4": DESCRIPTORS_DTYPE}
 """Stored descriptor element types by their ``descriptor_dtype`` code."""
 
@@ -88,6 +90,9 @@ def fingerprint_to_row(fingerprint: Fingerprint) -> dict[str, Any]:
         "alv_x": float(alv[0]),
         "alv_y": float(alv[1]),
         "params_json": params_to_json(fingerprint.params),
+        "keypoint_sizes_px": None
+        if fingerprint.keypoint_sizes_px is None
+        else np.ascontiguousarray(fingerprint.keypoint_sizes_px, SIZES_DTYPE).tobytes(),
     }
 
 
@@ -117,8 +122,10 @@ def fingerprint_from_row(
     descriptor_dtype: str,
     descriptors_blob: bytes,
     params: Mapping[str, ParamValue],
+    sizes_blob: bytes | None = None,
 ) -> Fingerprint:
-    """Rebuild a :class:`Fingerprint` from row values (keypoints and bearings: read-only views)."""
+    """Rebuild a :class:`Fingerprint` from row values (keypoints, bearings and sizes: read-only
+    views; ``sizes_blob`` None: sizes not known)."""
     return Fingerprint(
         detector=detector,
         image_width_px=image_width_px,
@@ -129,6 +136,7 @@ def fingerprint_from_row(
             descriptors_blob, descriptor_dtype, n_keypoints, descriptor_dim
         ),
         params=params,
+        keypoint_sizes_px=None if sizes_blob is None else np.frombuffer(sizes_blob, SIZES_DTYPE),
     )
 
 

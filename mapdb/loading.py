@@ -25,19 +25,26 @@ from mapdb.codec import (
     DESCRIPTOR_STORAGE,
     DESCRIPTORS_DTYPE,
     KEYPOINTS_DTYPE,
+    SIZES_DTYPE,
     ParamsCache,
     decode_descriptors,
     fingerprint_from_row,
 )
 from mapdb.database import MapDatabase
 from mapdb.errors import EmptyMapError, translate_sqlite_error
-from mapdb.records import FingerprintTable, MapSnapshot, PlaceStore, StoredFingerprint
+from mapdb.records import (
+    FingerprintTable,
+    MapSnapshot,
+    PlaceStore,
+    StoredFingerprint,
+    stacked_sizes_px,
+)
 from mapdb.store import PlaceCatalog, SqlitePlaceStore
 
 _SELECT = (
     "SELECT f.place_id, r.name, f.detector, p.image_width_px, p.image_height_px, "
     "f.n_keypoints, f.descriptor_dim, f.keypoints_xy, f.bearings_rad, f.descriptor_dtype, "
-    "f.descriptors, f.alv_x, f.alv_y, f.params_json "
+    "f.descriptors, f.alv_x, f.alv_y, f.params_json, f.keypoint_sizes_px "
     "FROM fingerprints f JOIN places p ON p.id = f.place_id JOIN rooms r ON r.id = p.room_id"
 )
 
@@ -82,6 +89,7 @@ def load_fingerprints(map_db: MapDatabase, detector: str | None = None) -> list[
                 row[9],
                 row[10],
                 params_of(row[13]),
+                row[14],
             ),
         )
         for row in _query(map_db, detector)
@@ -97,7 +105,7 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
     rows = _query(map_db, detector)
     params_of = ParamsCache()
     if not rows:
-        columns: list[tuple] = [()] * 14
+        columns: list[tuple] = [()] * 15
     else:
         columns = list(zip(*rows, strict=True))
     dims = set(columns[6])
@@ -119,6 +127,10 @@ def load_fingerprint_table(map_db: MapDatabase, detector: str) -> FingerprintTab
         alv_xy=np.array([columns[11], columns[12]], dtype=np.float64).T.reshape(len(rows), 2),
         image_sizes_px=np.array([columns[3], columns[4]], dtype=np.int64).T.reshape(len(rows), 2),
         params=tuple(params_of(text) for text in columns[13]),
+        keypoint_sizes_px=stacked_sizes_px(
+            [None if b is None else np.frombuffer(b, SIZES_DTYPE) for b in columns[14]],
+            columns[5],
+        ),
     )
 
 

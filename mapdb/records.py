@@ -191,6 +191,9 @@ class Fingerprint:
     cylindrical panorama is ``-2*pi*x/W`` wrapped to (-pi, pi]. ``descriptors`` are float32 rows
     (128 values for SIFT). ``params`` records how they were extracted (for the map database),
     among them the camera model (:func:`homing.cameras.camera_from_params`).
+    ``keypoint_sizes_px`` are the keypoints' diameters (px on that panorama, as the detector
+    gives them: a feature seen nearer is larger), None where they are not known (places stored
+    before schema version 5, see :mod:`mapdb.schema`).
 
     ``camera`` is the panorama's camera model (:mod:`homing.cameras`), built once: the
     ``camera_model`` given (the one the extraction used; it must be of the image's size), else
@@ -204,6 +207,7 @@ class Fingerprint:
     bearings_rad: np.ndarray
     descriptors: np.ndarray
     params: Mapping[str, ParamValue] = field(default_factory=dict)
+    keypoint_sizes_px: np.ndarray | None = None
     camera_model: InitVar[CameraModel | None] = None
     camera: CameraModel = field(init=False, repr=False, compare=False)
 
@@ -230,6 +234,11 @@ class Fingerprint:
             )
         if len(self.descriptors) != n:
             raise ValueError(f"descriptors has {len(self.descriptors)} rows for {n} bearings")
+        if self.keypoint_sizes_px is not None and np.shape(self.keypoint_sizes_px) != (n,):
+            raise ValueError(
+                f"keypoint_sizes_px must have shape ({n},) to match {n} bearings, "
+                f"got {np.shape(self.keypoint_sizes_px)}"
+            )
 
     @property
     def n(self) -> int:
@@ -254,6 +263,7 @@ class Fingerprint:
             bearings_rad=np.zeros(0, dtype=np.float64),
             descriptors=np.zeros((0, descriptor_size), dtype=np.float32),
             params=dict(params or {}),
+            keypoint_sizes_px=np.zeros(0, dtype=np.float32),
         )
 
     def select(self, mask: np.ndarray) -> Fingerprint:
@@ -266,7 +276,20 @@ class Fingerprint:
             keypoints_xy=self.keypoints_xy[mask],
             bearings_rad=self.bearings_rad[mask],
             descriptors=self.descriptors[mask],
+            keypoint_sizes_px=None
+            if self.keypoint_sizes_px is None
+            else self.keypoint_sizes_px[mask],
             camera_model=self.camera,
+        )
+
+    def keypoint_sizes_rad(self) -> np.ndarray | None:
+        """The keypoints' sizes as angles (radians: px times 2 pi over the panorama's width, the
+        horizontal scale of every camera model here), comparable between panoramas of different
+        widths; None where not known."""
+        if self.keypoint_sizes_px is None:
+            return None
+        return np.asarray(self.keypoint_sizes_px, dtype=np.float64) * (
+            2.0 * np.pi / self.image_width_px
         )
 
     def rays(self) -> np.ndarray:
@@ -293,7 +316,8 @@ class FingerprintTable:
     float32, ``alv_xy`` (m, 2) float64, ``place_ids`` (m,) int64, ``rooms`` one name per place,
     ``image_sizes_px`` (m, 2) int64 ``(width, height)`` of each place's panorama, ``params`` each
     place's extraction parameters, ``keypoint_place_index`` (N,) index into ``place_ids`` of each
-    row.
+    row, ``keypoint_sizes_px`` (N,) float32 the keypoints' diameters (NaN for a place whose sizes
+    are not known; None when no place's are).
     """
 
     detector: str
@@ -306,6 +330,7 @@ class FingerprintTable:
     alv_xy: np.ndarray
     image_sizes_px: np.ndarray
     params: tuple[Mapping[str, ParamValue], ...]
+    keypoint_sizes_px: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         m = len(self.place_ids)
@@ -357,6 +382,9 @@ class FingerprintTable:
                 [(fp.image_width_px, fp.image_height_px) for fp in fingerprints], dtype=np.int64
             ).reshape(-1, 2),
             params=tuple(fp.params for fp in fingerprints),
+            keypoint_sizes_px=stacked_sizes_px(
+                [fp.keypoint_sizes_px for fp in fingerprints], [fp.n for fp in fingerprints]
+            ),
         )
 
     @cached_property
@@ -414,6 +442,7 @@ class FingerprintTable:
             bearings_rad=self.bearings_rad[rows],
             descriptors=self.descriptors[rows],
             params=self.params[i],
+            keypoint_sizes_px=known_sizes_px(self.keypoint_sizes_px, rows),
             camera_model=self.cameras[i],
         )
 
@@ -435,7 +464,37 @@ class FingerprintTable:
             alv_xy=self.alv_xy[indices],
             image_sizes_px=self.image_sizes_px[indices],
             params=tuple(self.params[i] for i in indices),
+            keypoint_sizes_px=None
+            if self.keypoint_sizes_px is None
+            else self.keypoint_sizes_px[rows],
         )
+
+
+def stacked_sizes_px(
+    sizes: Sequence[np.ndarray | None], counts: Sequence[int]
+) -> np.ndarray | None:
+    """The keypoint sizes of places with ``counts`` keypoints each, stacked as float32 with NaN
+    for a place whose sizes are None; None when none are known. ``ValueError`` if a place's
+    sizes are not one per keypoint."""
+    if all(s is None for s in sizes):
+        return None
+    for i, (s, n) in enumerate(zip(sizes, counts, strict=True)):
+        if s is not None and len(s) != n:
+            raise ValueError(f"place {i} has {len(s)} keypoint sizes for {n} keypoints")
+    parts = [
+        np.full(n, np.nan, np.float32) if s is None else np.asarray(s, np.float32)
+        for s, n in zip(sizes, counts, strict=True)
+    ]
+    return np.concatenate(parts) if parts else np.zeros(0, np.float32)
+
+
+def known_sizes_px(stacked: np.ndarray | None, rows: slice) -> np.ndarray | None:
+    """The sizes of one place's ``rows`` of a stack (:func:`stacked_sizes_px`); None if its
+    sizes are not known."""
+    if stacked is None:
+        return None
+    sizes = stacked[rows]
+    return None if np.isnan(sizes).any() else sizes
 
 
 class PlaceStore(Protocol):

@@ -10,12 +10,14 @@ may already be there.
 
 The encoding (:func:`encode_snapshot`, :func:`encode_changes`): ``MAGIC``, the header's length
 (4 bytes, big-endian), the header as UTF-8 JSON, then the blobs (keypoints, bearings,
-descriptors) one after another; a blob cell in the header is ``[offset, length]`` into that
-tail. Decoding checks everything a replica would store: the envelope, every row's columns and
-types, every fingerprint's blob sizes against its keypoint count and descriptor size, and that
-changes come in contiguous versions; anything else is a :class:`BadMapDataError` naming what
-is wrong. A large snapshot travels in chunks (:func:`split_chunks`) joined and checked against
-its SHA-256 (:func:`join_chunks`). No I/O here.
+descriptors, keypoint sizes) one after another; a blob cell in the header is ``[offset,
+length]`` into that tail (or null where a blob may be NULL). Decoding checks everything a
+replica would store: the envelope, every row's columns and types, every fingerprint's blob
+sizes against its keypoint count and descriptor size, and that changes come in contiguous
+versions (a row of an older schema may lack its trailing optional columns); anything else is
+a :class:`BadMapDataError` naming what is wrong. A large snapshot travels in chunks
+(:func:`split_chunks`) joined and checked against its SHA-256 (:func:`join_chunks`). No I/O
+here.
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ MAGIC = b"toploc-map-rows\x001"
 CHUNK_BYTES = 4 << 20
 """The size of a snapshot's chunks on the bus (the last one is shorter)."""
 
-_INT, _STR, _OPT_STR, _OPT_FLOAT, _FLOAT, _BLOB = "int", "str", "str?", "float?", "float", "blob"
+_INT, _STR, _OPT_STR, _OPT_FLOAT, _FLOAT = "int", "str", "str?", "float?", "float"
+_BLOB, _OPT_BLOB = "blob", "blob?"
 COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
     "rooms": (("id", _INT), ("name", _STR), ("created_utc", _STR)),
     "edges": (("room_a_id", _INT), ("room_b_id", _INT), ("created_utc", _STR)),
@@ -47,11 +50,12 @@ COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
         ("id", _INT), ("place_id", _INT), ("detector", _STR), ("n_keypoints", _INT),
         ("descriptor_dim", _INT), ("keypoints_xy", _BLOB), ("bearings_rad", _BLOB),
         ("descriptor_dtype", _STR), ("descriptors", _BLOB), ("alv_x", _FLOAT), ("alv_y", _FLOAT),
-        ("params_json", _STR),
+        ("params_json", _STR), ("keypoint_sizes_px", _OPT_BLOB),
     ),
     "legs": (("place_id", _INT), ("from_place_id", _INT), ("via_json", _STR)),
 }  # fmt: skip
-"""Each table's columns in order, with their kind (``?``: may be NULL)."""
+"""Each table's columns in order, with their kind (``?``: may be NULL). A row may leave out
+trailing columns that may be NULL (rows of a map of an older schema): they decode as NULL."""
 TABLES = tuple(COLUMNS)
 DESCRIPTOR_BYTES = {"u1": 1, "f4": 4}
 """Bytes per descriptor value by the ``descriptor_dtype`` code (:mod:`mapdb.codec`)."""
@@ -126,7 +130,10 @@ def _rows_to_json(rows: MapRows, blobs: _Blobs) -> dict[str, Any]:
     for name in TABLES:
         kinds = [kind for _, kind in COLUMNS[name]]
         tables[name] = [
-            [blobs.add(bytes(v)) if k == _BLOB else v for v, k in zip(row, kinds, strict=True)]
+            [
+                blobs.add(bytes(v)) if k.startswith(_BLOB) and v is not None else v
+                for v, k in zip(row, kinds, strict=True)
+            ]
             for row in rows.table(name)
         ]
     tables["likelihoods"] = [list(pair) for pair in rows.likelihoods]
@@ -189,7 +196,9 @@ def _header(data: bytes, what: str) -> tuple[dict[str, Any], memoryview]:
 
 def _cell(value: Any, kind: str, tail: memoryview, where: str) -> Any:
     """One decoded cell of column kind ``kind`` (a blob: its bytes from ``tail``)."""
-    if kind == _BLOB:
+    if value is None and kind.endswith("?"):
+        return None
+    if kind.startswith(_BLOB):
         ok = (
             isinstance(value, list)
             and len(value) == 2
@@ -221,8 +230,8 @@ def _cell(value: Any, kind: str, tail: memoryview, where: str) -> Any:
 
 def check_fingerprint_row(row: Row, where: str) -> None:
     """Raise :class:`BadMapDataError` unless ``row`` (a ``fingerprints`` row) decodes: known
-    descriptor code, blob sizes that match its keypoint count and descriptor size, parameters
-    that are a JSON object."""
+    descriptor code, blob sizes that match its keypoint count and descriptor size (the sizes'
+    blob may be NULL), parameters that are a JSON object."""
     columns = dict(zip((name for name, _ in COLUMNS["fingerprints"]), row, strict=True))
     n, dim, code = columns["n_keypoints"], columns["descriptor_dim"], columns["descriptor_dtype"]
     where = f"{where} (fingerprint {columns['id']}, place {columns['place_id']})"
@@ -234,9 +243,10 @@ def check_fingerprint_row(row: Row, where: str) -> None:
         "keypoints_xy": n * 2 * 4,
         "bearings_rad": n * 8,
         "descriptors": n * dim * DESCRIPTOR_BYTES[code],
+        "keypoint_sizes_px": n * 4,
     }
     for name, size in expected.items():
-        if len(columns[name]) != size:
+        if columns[name] is not None and len(columns[name]) != size:
             raise BadMapDataError(
                 f"{where}: its {name} blob has {len(columns[name])} bytes, {size} expected for "
                 f"{n} keypoints" + (f" of {dim} {code}" if name == "descriptors" else "")
@@ -261,6 +271,8 @@ def _rows_from_json(tables: Any, tail: memoryview, where: str) -> MapRows:
         out = []
         for i, row in enumerate(rows):
             at = f"{where}: {name} row {i}"
+            if isinstance(row, list) and all(k.endswith("?") for _, k in columns[len(row) :]):
+                row = row + [None] * (len(columns) - len(row))  # an older schema's row
             if not isinstance(row, list) or len(row) != len(columns):
                 raise BadMapDataError(f"{at}: expected {len(columns)} columns, got {row!r:.60}")
             cells = tuple(

@@ -31,6 +31,9 @@ Tables (all STRICT; positions in metres and headings in degrees in the frame of 
   place was recorded on (:class:`mapdb.records.Leg`): the place recorded before it on that
   drive and the odometry positions between them (JSON ``[[x_m, y_m], ...]``); both places'
   poses are then in that drive's odometry frame. Written with its place, in its change.
+- ``fingerprints.keypoint_sizes_px`` (version 5): the keypoints' diameters (a blob, see
+  :mod:`mapdb.codec`), which homing uses to tell nearer from farther; NULL for the places
+  stored before (their images are not kept, so they cannot be found again).
 """
 
 from __future__ import annotations
@@ -172,7 +175,18 @@ def _v4_legs(db: sqlite_utils.Database) -> None:
     db.table("legs").create_index(["from_place_id"])
 
 
-MIGRATIONS: tuple[Migration, ...] = (_v1_initial, _v2_camera, _v3_versions, _v4_legs)
+def _v5_keypoint_sizes(db: sqlite_utils.Database) -> None:
+    """Version 5: each fingerprint's keypoint sizes (NULL for those stored before)."""
+    db.execute("ALTER TABLE fingerprints ADD COLUMN keypoint_sizes_px BLOB")
+
+
+MIGRATIONS: tuple[Migration, ...] = (
+    _v1_initial,
+    _v2_camera,
+    _v3_versions,
+    _v4_legs,
+    _v5_keypoint_sizes,
+)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 READ_ONLY_VIEWS: dict[Migration, str] = {
@@ -183,6 +197,10 @@ READ_ONLY_VIEWS: dict[Migration, str] = {
     ),
     _v4_legs: (
         "CREATE TEMP VIEW legs AS SELECT 0 AS place_id, 0 AS from_place_id, '' AS via_json WHERE 0"
+    ),
+    _v5_keypoint_sizes: (
+        "CREATE TEMP VIEW fingerprints AS SELECT *, NULL AS keypoint_sizes_px "
+        "FROM main.fingerprints"
     ),
 }
 """For a migration, the SQL that shows its result to a read-only connection without writing:

@@ -43,7 +43,8 @@ _CATALOG = (
 )
 _FULL = (
     "SELECT f.id, f.n_keypoints, f.descriptor_dim, f.keypoints_xy, f.bearings_rad, "
-    "f.descriptor_dtype, f.descriptors FROM fingerprints f WHERE f.id IN ({})"
+    "f.descriptor_dtype, f.descriptors, f.keypoint_sizes_px FROM fingerprints f "
+    "WHERE f.id IN ({})"
 )
 _DESCRIPTORS = (
     "SELECT f.id, f.n_keypoints, f.descriptor_dim, f.descriptor_dtype, f.descriptors "
@@ -199,13 +200,13 @@ class SqlitePlaceStore:
         by_row = {int(self.catalog.fingerprint_ids[i]): i for i in indices}
         rows = self._select(_FULL, list(by_row))
         result = {}
-        for row_id, n, dim, keypoints, bearings, code, blob in rows:
+        for row_id, n, dim, keypoints, bearings, code, blob, sizes in rows:
             i = by_row[row_id]
             try:
                 width, height = (int(v) for v in self.image_sizes_px[i])
                 fp = fingerprint_from_row(
                     self.detector, width, height, n, dim, keypoints, bearings, code, blob,
-                    self.params[i],
+                    self.params[i], sizes,
                 )  # fmt: skip
             except (ValueError, KeyError) as error:
                 raise self._undecodable(i, error) from None

@@ -12,9 +12,14 @@ from mapdb.records import Fingerprint, NewPlace
 
 
 def make_fingerprint(
-    rng: np.random.Generator, detector: str = "sift", n: int = 10, dim: int = 128
+    rng: np.random.Generator,
+    detector: str = "sift",
+    n: int = 10,
+    dim: int = 128,
+    sizes: bool = True,
 ) -> Fingerprint:
-    """A random fingerprint of ``n`` keypoints on a 360 x 40 px panorama."""
+    """A random fingerprint of ``n`` keypoints on a 360 x 40 px panorama; with random keypoint
+    sizes (2-40 px), or none known (``sizes=False``: a place stored before schema 5)."""
     xy = rng.uniform([0, 0], [359, 39], size=(n, 2)).astype(np.float32)
     return Fingerprint(
         detector=detector,
@@ -24,6 +29,7 @@ def make_fingerprint(
         bearings_rad=np.angle(np.exp(-2j * np.pi * xy[:, 0].astype(np.float64) / 360)),
         descriptors=rng.random((n, dim), dtype=np.float32),
         params={"detector": detector, "max_keypoints": 2000, "band_deg": 20.0},
+        keypoint_sizes_px=rng.uniform(2.0, 40.0, n).astype(np.float32) if sizes else None,
     )
 
 

@@ -266,17 +266,17 @@ def test_cheirality_sign_is_counted_above_the_floor() -> None:
     assert cheirality_sign(truth, query, place, min_elevation_deg=-90.0) == -1
 
 
-def test_elevation_vote_says_which_side_of_the_axis_the_place_lies_on() -> None:
+def test_distance_vote_says_which_side_of_the_axis_the_place_lies_on() -> None:
     from dataclasses import replace
 
-    from localizer.verification import elevation_vote
+    from localizer.verification import distance_vote
 
     query, place, pairs = two_views(np.random.default_rng(5), 120, 0.4, np.array([1.0, 0.5, 0.0]))
     result = verify(query, place, pairs, VerificationParams(seed=0))
-    vote, statistic = elevation_vote(result, query, place)
+    vote, statistic = distance_vote(result, query, place)
     assert vote == 1 and statistic < -2.0
     flipped = replace(result, translation_dir=-result.translation_dir)
-    assert elevation_vote(flipped, query, place)[0] == -1
+    assert distance_vote(flipped, query, place)[0] == -1
 
 
 @settings(max_examples=40, deadline=None)
@@ -286,32 +286,96 @@ def test_elevation_vote_says_which_side_of_the_axis_the_place_lies_on() -> None:
     st.floats(-np.pi, np.pi),
     st.integers(0, 2**32 - 1),
 )
-def test_elevation_vote_follows_the_true_translation_whatever_the_pose(
+def test_distance_vote_follows_the_true_translation_whatever_the_pose(
     heading_rad: float, distance_m: float, direction_rad: float, seed: int
 ) -> None:
     """With exact rays and the true pose (no RANSAC), the elevations side with the truth."""
-    from localizer.verification import elevation_vote
+    from localizer.verification import distance_vote
 
     t_query = distance_m * np.array([np.cos(direction_rad), np.sin(direction_rad), 0.0])
     query, place, pairs = two_views(np.random.default_rng(seed), 60, heading_rad, t_query)
     home = rz(heading_rad).T @ (-t_query) / distance_m  # the place, in the query's frame
     truth = Verification(len(pairs), pairs, float(heading_rad), rz(heading_rad).T, home)
-    assert elevation_vote(truth, query, place)[0] == 1
+    assert distance_vote(truth, query, place)[0] == 1
 
 
-def test_elevation_vote_needs_points_off_the_horizon() -> None:
+def flat_views(
+    rng: np.random.Generator, n: int, yaw_rad: float, t_query_in_place_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Verification]:
+    """``n`` points at the cameras' height (on the horizon: their elevations say nothing) seen
+    from the place (origin) and the query (as :func:`two_views`): the query's and the place's
+    rays, the keypoint sizes (px) a 20 px-metre feature has at each one's distance, the pairs
+    and the true verification."""
+    points = np.column_stack([rng.uniform(-4, 4, n), rng.uniform(-4, 4, n), np.zeros(n)])
+    points[np.linalg.norm(points[:, :2], axis=1) < 0.8, :2] *= 3.0
+    in_query = (points - t_query_in_place_m) @ rz(yaw_rad)
+    query = in_query / np.linalg.norm(in_query, axis=1, keepdims=True)
+    place = points / np.linalg.norm(points, axis=1, keepdims=True)
+    sizes_query = 20.0 / np.linalg.norm(in_query, axis=1)
+    sizes_place = 20.0 / np.linalg.norm(points, axis=1)
+    pairs = np.column_stack([np.arange(n), np.arange(n)])
+    home = rz(yaw_rad).T @ (-t_query_in_place_m) / np.linalg.norm(t_query_in_place_m)
+    truth = Verification(n, pairs, float(yaw_rad), rz(yaw_rad).T, home)
+    return query, place, sizes_query, sizes_place, pairs, truth
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.floats(-np.pi, np.pi),
+    st.floats(0.5, 3.0),
+    st.floats(-np.pi, np.pi),
+    st.integers(0, 2**32 - 1),
+)
+def test_keypoint_sizes_tell_the_side_where_the_elevations_cannot(
+    heading_rad: float, distance_m: float, direction_rad: float, seed: int
+) -> None:
     from dataclasses import replace
 
-    from localizer.verification import ELEVATION_MIN_INLIERS, elevation_vote
+    from localizer.verification import distance_vote
+
+    t_query = distance_m * np.array([np.cos(direction_rad), np.sin(direction_rad), 0.0])
+    query, place, sizes_q, sizes_p, _, truth = flat_views(
+        np.random.default_rng(seed), 40, heading_rad, t_query
+    )
+    assert distance_vote(truth, query, place) == (0, 0.0)  # on the horizon: no elevations
+    assert distance_vote(truth, query, place, sizes_q, sizes_p)[0] == 1
+    flipped = replace(truth, translation_dir=-truth.translation_dir)
+    assert distance_vote(flipped, query, place, sizes_q, sizes_p)[0] == -1
+
+
+def test_keypoint_sizes_on_the_floor_are_left_out() -> None:
+    """Floor matches that fit the opposite translation (a plank matched to the next one: their
+    elevations and sizes say the opposite side) do not outvote the points above the floor."""
+    from localizer.verification import distance_vote
+
+    rng = np.random.default_rng(8)
+    t_query = np.array([1.5, 0.0, 0.0])
+    query, place, sizes_q, sizes_p, _, truth = flat_views(rng, 20, 0.0, t_query)
+    floor = np.column_stack([rng.uniform(-2, 2, 60), rng.uniform(-2, 2, 60), np.full(60, -1.4)])
+    floor_q, floor_p = floor + t_query, floor  # seen as if from the query's mirror image
+    query = np.vstack([query, floor_q / np.linalg.norm(floor_q, axis=1, keepdims=True)])
+    place = np.vstack([place, floor_p / np.linalg.norm(floor_p, axis=1, keepdims=True)])
+    sizes_q = np.concatenate([sizes_q, 20.0 / np.linalg.norm(floor_q, axis=1)])
+    sizes_p = np.concatenate([sizes_p, 20.0 / np.linalg.norm(floor_p, axis=1)])
+    pairs = np.column_stack([np.arange(80), np.arange(80)])
+    truth = Verification(80, pairs, 0.0, np.eye(3), truth.translation_dir)
+    assert distance_vote(truth, query, place, sizes_q, sizes_p)[0] == 1
+    assert distance_vote(truth, query, place, sizes_q, sizes_p, min_elevation_deg=-90.0)[0] == -1
+
+
+def test_distance_vote_needs_enough_points_that_give_a_distance() -> None:
+    from dataclasses import replace
+
+    from localizer.verification import DISTANCE_MIN_INLIERS, distance_vote
 
     query, place, pairs = two_views(np.random.default_rng(7), 40, 0.0, np.array([1.0, 0.0, 0.0]))
     truth = Verification(len(pairs), pairs, 0.0, np.eye(3), np.array([-1.0, 0.0, 0.0]))
     flat_query, flat_place = query.copy(), place.copy()
     flat_query[:, 2] = flat_place[:, 2] = 0.0  # every point at the camera's height
-    assert elevation_vote(truth, flat_query, flat_place) == (0, 0.0)
-    few = pairs[: ELEVATION_MIN_INLIERS - 1]
-    assert elevation_vote(replace(truth, inliers=len(few), inlier_pairs=few), query, place) == (
-        0,
-        0.0,
-    )
-    assert elevation_vote(Verification.none(), query, place) == (0, 0.0)
+    assert distance_vote(truth, flat_query, flat_place) == (0, 0.0)
+    few = pairs[: DISTANCE_MIN_INLIERS - 1]
+    sizes = np.ones(len(query))
+    assert distance_vote(
+        replace(truth, inliers=len(few), inlier_pairs=few), query, place, sizes, sizes
+    ) == (0, 0.0)
+    assert distance_vote(Verification.none(), query, place) == (0, 0.0)

@@ -344,16 +344,17 @@ def test_pose_direction_keeps_the_axis_the_alvs_agree_with():
     assert _angle_error_deg(direction, truth) == pytest.approx(math.degrees(0.02), abs=1e-6)
 
 
-def test_pose_direction_takes_the_elevations_side_where_the_other_votes_tie():
+def test_pose_direction_takes_the_distances_side_against_the_three_other_votes():
     truth, yaw, alv_here, alv_home = _pose_case()
     wrong_way = _verification(yaw, truth + math.pi)
-    # the all-feature ALV (right) against the matched ALV and the cheirality (wrong): 1 to 2;
-    # the elevations side with the truth, and the tie goes their way
+    # along a hall the cheirality and both ALVs can all be wrong (here: the matched ALV and the
+    # cheirality, with the all-feature ALV turned the wrong way too); the change of distance
+    # says the place lies behind the verified translation, and decides
     direction = signed_pose_direction_rad(
-        wrong_way, truth + math.pi, alv_here, alv_home, 1, elevation=-1
+        wrong_way, truth + math.pi, -alv_here, -alv_home, 1, distance=-1
     )
     assert _angle_error_deg(direction, truth) < 1e-6
-    without = signed_pose_direction_rad(wrong_way, truth + math.pi, alv_here, alv_home, 1)
+    without = signed_pose_direction_rad(wrong_way, truth + math.pi, -alv_here, -alv_home, 1)
     assert _angle_error_deg(without, truth) == pytest.approx(180.0)
 
 

@@ -34,12 +34,22 @@ def assert_same_fingerprint(loaded: Fingerprint, original: Fingerprint) -> None:
     assert loaded.keypoints_xy.dtype == np.float32
     assert loaded.descriptors.dtype == np.float32
     assert loaded.descriptors.shape == original.descriptors.shape
+    if original.keypoint_sizes_px is None:
+        assert loaded.keypoint_sizes_px is None
+    else:
+        assert loaded.keypoint_sizes_px is not None
+        np.testing.assert_array_equal(loaded.keypoint_sizes_px, original.keypoint_sizes_px)
 
 
 @settings(max_examples=40, deadline=None)
-@given(n=st.integers(0, 60), dim=st.sampled_from([1, 64, 128]), seed=st.integers(0, 2**32 - 1))
-def test_codec_round_trip_is_exact(n: int, dim: int, seed: int) -> None:
-    original = make_fingerprint(np.random.default_rng(seed), "sift", n, dim)
+@given(
+    n=st.integers(0, 60),
+    dim=st.sampled_from([1, 64, 128]),
+    seed=st.integers(0, 2**32 - 1),
+    sizes=st.booleans(),
+)
+def test_codec_round_trip_is_exact(n: int, dim: int, seed: int, sizes: bool) -> None:
+    original = make_fingerprint(np.random.default_rng(seed), "sift", n, dim, sizes)
     row = fingerprint_to_row(original)
     loaded = fingerprint_from_row(
         row["detector"],
@@ -52,6 +62,7 @@ def test_codec_round_trip_is_exact(n: int, dim: int, seed: int) -> None:
         row["descriptor_dtype"],
         row["descriptors"],
         ParamsCache()(row["params_json"]),
+        row["keypoint_sizes_px"],
     )
     assert_same_fingerprint(loaded, original)
     np.testing.assert_allclose([row["alv_x"], row["alv_y"]], stored_alv(original.bearings_rad))
@@ -102,6 +113,20 @@ def test_table_matches_the_per_row_list(filled_map: MapDatabase) -> None:
             np.testing.assert_array_equal(table.keypoints_xy[span], stored.fingerprint.keypoints_xy)
             np.testing.assert_array_equal(table.alv_xy[i], stored.alv_xy)
             assert (table.keypoint_place_index[span] == i).all()
+
+
+def test_a_place_without_sizes_has_none_in_the_table_and_the_others_keep_theirs(
+    map_db: MapDatabase, rng: np.random.Generator
+) -> None:
+    with_sizes = make_fingerprint(rng, "sift", 6)
+    without = make_fingerprint(rng, "sift", 4, sizes=False)
+    map_db.add_place(new_place("a", 1), [with_sizes])
+    map_db.add_place(new_place("a", 2), [without])
+    table = load_fingerprint_table(map_db, "sift")
+    assert_same_fingerprint(table.fingerprint(0), with_sizes)
+    assert table.fingerprint(1).keypoint_sizes_px is None
+    assert table.subset([1]).fingerprint(0).keypoint_sizes_px is None
+    assert_same_fingerprint(table.subset([1, 0]).fingerprint(1), with_sizes)
 
 
 def test_table_of_unknown_detector_is_empty(filled_map: MapDatabase) -> None:

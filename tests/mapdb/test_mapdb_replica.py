@@ -16,6 +16,7 @@ from mapdb_helpers import assert_consistent, make_fingerprint, new_place
 
 from mapdb.database import MapDatabase
 from mapdb.errors import ReplicaError, UnknownVersionError
+from mapdb.loading import load_fingerprints
 from mapdb.replica import (
     apply_changes,
     check_same_map,
@@ -149,14 +150,24 @@ def test_missing_chunks_or_another_checksum_are_named() -> None:
         join_chunks(chunks, 11, sha256_hex(data), "snapshot")
 
 
-def _with_short_descriptors(data: bytes) -> bytes:
-    """``data`` (encoded changes) with the first fingerprint's descriptor blob 8 bytes short."""
+def _with_fingerprint_rows(data: bytes, edit) -> bytes:
+    """``data`` (encoded changes) with ``edit`` applied to each change's fingerprint rows."""
     header_end = len(MAGIC) + 4 + int.from_bytes(data[len(MAGIC) : len(MAGIC) + 4], "big")
     header = json.loads(data[len(MAGIC) + 4 : header_end])
-    row = header["changes"][0]["tables"]["fingerprints"][0]
-    row[8][1] -= 8  # the descriptors' [offset, length]
+    for change in header["changes"]:
+        for row in change["tables"].get("fingerprints", []):
+            edit(row)
     text = json.dumps(header).encode()
     return MAGIC + len(text).to_bytes(4, "big") + text + data[header_end:]
+
+
+def _with_short_descriptors(data: bytes) -> bytes:
+    """``data`` (encoded changes) with the fingerprints' descriptor blobs 8 bytes short."""
+
+    def shorten(row: list) -> None:
+        row[8][1] -= 8  # the descriptors' [offset, length]
+
+    return _with_fingerprint_rows(data, shorten)
 
 
 def test_a_fingerprint_blob_that_does_not_decode_is_refused(site, replica, rng) -> None:
@@ -166,6 +177,32 @@ def test_a_fingerprint_blob_that_does_not_decode_is_refused(site, replica, rng) 
         BadMapDataError, match=r"change 5: fingerprints row 0 .*descriptors blob has"
     ):
         decode_changes(data)
+
+
+def test_changes_from_a_map_before_keypoint_sizes_are_applied_without_them(
+    site, replica, rng
+) -> None:
+    fill(site, rng, 30, 1)
+    data = encode_changes(str(site.map_id()), read_changes(site, 4))
+    older = _with_fingerprint_rows(data, lambda row: row.pop())  # no sizes column
+    map_id, changes = decode_changes(older)
+    apply_changes(replica, map_id, changes)
+    with MapDatabase.open(replica, readonly=True) as copy:
+        (stored,) = [
+            f for f in load_fingerprints(copy) if f.place_id == changes[0].rows.places[0][0]
+        ]
+    assert stored.fingerprint.keypoint_sizes_px is None
+
+
+def test_keypoint_sizes_that_are_not_one_per_keypoint_are_refused(site, replica, rng) -> None:
+    fill(site, rng, 30, 1)
+    data = encode_changes(str(site.map_id()), read_changes(site, 4))
+
+    def shorten(row: list) -> None:
+        row[12][1] -= 4  # the sizes' [offset, length]
+
+    with pytest.raises(BadMapDataError, match=r"keypoint_sizes_px blob has .* for 10 keypoints"):
+        decode_changes(_with_fingerprint_rows(data, shorten))
 
 
 def test_a_change_out_of_order_leaves_the_replica_as_it_was(site, replica, rng) -> None:

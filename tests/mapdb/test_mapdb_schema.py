@@ -162,3 +162,24 @@ def test_a_version_1_map_opens_and_its_places_are_cylinders(
         fingerprint = replace(make_fingerprint(rng, "sift", 5), params={"camera": "equirect"})
         new_id = map_db.add_place(new_place("hall", 7), [fingerprint])
         assert map_db.place(new_id).camera == "equirect"
+
+
+def test_a_version_4_map_keeps_its_places_without_keypoint_sizes(
+    db_path: Path, rng: np.random.Generator
+) -> None:
+    from mapdb.loading import load_fingerprint_table
+
+    with MapDatabase.open(db_path) as old:
+        old.add_place(new_place("hall", 1), [make_fingerprint(rng, "sift", 5, sizes=False)])
+    with sqlite3.connect(db_path) as conn:  # as the map was before the sizes
+        conn.execute("ALTER TABLE fingerprints DROP COLUMN keypoint_sizes_px")
+        conn.execute("UPDATE meta SET value = '4' WHERE key = 'schema_version'")
+    with MapDatabase.open(db_path, readonly=True) as read_only:
+        assert load_fingerprint_table(read_only, "sift").fingerprint(0).keypoint_sizes_px is None
+    with MapDatabase.open(db_path) as map_db:
+        assert map_db.schema_version() == SCHEMA_VERSION
+        map_db.add_place(new_place("hall", 2), [make_fingerprint(rng, "sift", 7)])
+        table = load_fingerprint_table(map_db, "sift")
+        assert table.fingerprint(0).keypoint_sizes_px is None
+        sizes = table.fingerprint(1).keypoint_sizes_px
+        assert sizes is not None and sizes.shape == (7,)

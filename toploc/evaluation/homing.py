@@ -30,12 +30,13 @@ manifest (section 5.6). The others work without headings:
   yaw (the thesis method with the verification as its compass), ``"matched-alv"`` without
   geometry;
 * ``"pose-vote"``: the axis of the verified translation (any inlier count) with the sign that
-  most of four votes give: the pose's cheirality counted on the inliers above the floor
-  (:func:`localizer.verification.cheirality_sign`), the change of the inliers' elevations
-  where it is significant (:func:`localizer.visual_homing.counted_elevation_vote`),
-  ``"matched-alv"`` and ``"pose-compass"``; ``"matched-alv"`` without geometry
+  the inliers' change of distance gives where it is significant (their elevations and
+  keypoint sizes: :func:`localizer.visual_homing.counted_distance_vote`), else the sign that
+  most of three votes give: the pose's cheirality counted on the inliers above the floor
+  (:func:`localizer.verification.cheirality_sign`), ``"matched-alv"`` and
+  ``"pose-compass"``; ``"matched-alv"`` without geometry
   (:func:`localizer.visual_homing.signed_pose_direction_rad`, the closed loop's ``"pose"``
-  variant). The four fail on different pairs (see that function).
+  variant). Each vote fails on different pairs (see that function).
 
 The matched methods fall back to ``"alv-compass"`` for a pair whose matches give no home
 vector (no match, or a single one: aligning it zeroes the vector). MSER on these panoramas finds
@@ -88,7 +89,7 @@ from localizer.verification import (
     home_direction_rad,
     verify,
 )
-from localizer.visual_homing import counted_elevation_vote, signed_pose_direction_rad
+from localizer.visual_homing import counted_distance_vote, signed_pose_direction_rad
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import results_in_order, spawn_process_pool
@@ -377,7 +378,13 @@ def _home_directions(
                         alvs[i],
                         alvs[j],
                         cheirality_sign(v, cache.rays(i), cache.rays(j)),
-                        counted_elevation_vote(v, cache.rays(i), cache.rays(j)),
+                        counted_distance_vote(
+                            v,
+                            cache.rays(i),
+                            cache.rays(j),
+                            cache.fingerprints[i].keypoint_sizes_rad(),
+                            cache.fingerprints[j].keypoint_sizes_rad(),
+                        ),
                     )
                     for v, m, (i, j) in zip(verifications, matched, pairs.tolist(), strict=True)
                 ]
