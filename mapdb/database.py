@@ -561,6 +561,11 @@ class MapDatabase:
             rooms=self.rooms(),
             edges=self.edges(),
             fingerprints_per_detector=(counts := self.fingerprint_counts()),
+            fingerprints_without_sizes=int(
+                self.db.execute(
+                    "SELECT COUNT(*) FROM fingerprints WHERE keypoint_sizes_px IS NULL"
+                ).fetchone()[0]
+            ),
             likelihoods={d: model for d in counts if (model := self.likelihood(d)) is not None},
         )
 

@@ -166,6 +166,8 @@ class MapInfo:
     edges: list[tuple[str, str]]
     fingerprints_per_detector: dict[str, int] = field(default_factory=dict)
     likelihoods: dict[str, dict[str, Any]] = field(default_factory=dict)
+    fingerprints_without_sizes: int = 0
+    """Fingerprints stored before schema 5, without their keypoints' sizes."""
 
     @property
     def n_places(self) -> int:

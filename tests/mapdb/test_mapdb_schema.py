@@ -179,6 +179,7 @@ def test_a_version_4_map_keeps_its_places_without_keypoint_sizes(
     with MapDatabase.open(db_path) as map_db:
         assert map_db.schema_version() == SCHEMA_VERSION
         map_db.add_place(new_place("hall", 2), [make_fingerprint(rng, "sift", 7)])
+        assert map_db.info().fingerprints_without_sizes == 1
         table = load_fingerprint_table(map_db, "sift")
         assert table.fingerprint(0).keypoint_sizes_px is None
         sizes = table.fingerprint(1).keypoint_sizes_px

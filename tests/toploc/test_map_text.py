@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from localizer.likelihood import RatioLikelihood
-from mapdb.records import Leg, Place
-from toploc.commands.map_text import lookalike_lines
+from mapdb.records import Leg, MapInfo, Place, RoomSummary
+from toploc.commands.map_text import format_info, lookalike_lines
 
 DOORS = (("hall", "twin_a"), ("hall", "twin_b"), ("hall", "living"))
 TWINS = RatioLikelihood(lookalikes=(("twin_a", "twin_b"),))
@@ -47,3 +49,14 @@ def test_twins_whose_drives_beyond_end_in_a_room_of_one_place_are_not_said_told_
     assert not any("recorded drive out" in line for line in lines)
     [advice] = [line for line in lines if "known from one place" in line]
     assert "twin_a ~ twin_b" in advice and "Record a second place in living" in advice
+
+
+def test_places_stored_without_keypoint_sizes_are_counted_with_what_to_do():
+    info = MapInfo(Path("old.db"), 5, 1000, [RoomSummary(1, "hall", 2)], [], {"sift": 2})
+    assert "keypoints' sizes" not in format_info(info)
+    old = MapInfo(
+        Path("old.db"), 5, 1000, [RoomSummary(1, "hall", 2)], [], {"sift": 2},
+        fingerprints_without_sizes=2,
+    )  # fmt: skip
+    [line] = [line for line in format_info(old).splitlines() if "keypoints' sizes" in line]
+    assert line.strip().startswith("2 stored without") and "record them again" in line

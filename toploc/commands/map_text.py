@@ -158,6 +158,15 @@ def format_info(info: MapInfo, places: Sequence[Place] = ()) -> str:
         *hint,
         "fingerprints: "
         + (", ".join(f"{d} {n}" for d, n in info.fingerprints_per_detector.items()) or "none"),
+        *(
+            [
+                f"  {info.fingerprints_without_sizes} stored without their keypoints' sizes "
+                "(before schema 5): homing to those places judges nearer and farther by "
+                "elevations alone; record them again to keep the sizes"
+            ]
+            if info.fingerprints_without_sizes
+            else []
+        ),
         f"edges ({len(info.edges)}):",
         *(f"  {a} <-> {b}" for a, b in info.edges),
         "likelihood:",
