@@ -142,8 +142,10 @@ def format_info(info: MapInfo, places: Sequence[Place] = ()) -> str:
     hint = (
         [
             f"  one place only: {', '.join(single)} (a view far from it, at a door or in a "
-            "corner, may stay ambiguous; a second place there helps, and lets the calibration "
-            "measure the room)"
+            "corner, may stay ambiguous; from one place the map may not find a look-alike of "
+            "the room, and one view of that twin may then be taken for it: a second place "
+            "there helps and lets the calibration measure the room; twins you know of: "
+            "toploc map lookalike A B)"
         ]
         if single
         else []
