@@ -279,13 +279,18 @@ def test_distance_vote_says_which_side_of_the_axis_the_place_lies_on() -> None:
     assert distance_vote(flipped, query, place)[0] == -1
 
 
-@settings(max_examples=40, deadline=None)
-@given(
+query_poses = given(
     st.floats(-np.pi, np.pi),
     st.floats(0.5, 3.0),
     st.floats(-np.pi, np.pi),
     st.integers(0, 2**32 - 1),
 )
+"""The query's heading (rad), distance (m) and direction (rad) from the place, and a seed: the
+arguments of a property test over poses."""
+
+
+@settings(max_examples=40, deadline=None)
+@query_poses
 def test_distance_vote_follows_the_true_translation_whatever_the_pose(
     heading_rad: float, distance_m: float, direction_rad: float, seed: int
 ) -> None:
@@ -320,12 +325,7 @@ def flat_views(
 
 
 @settings(max_examples=40, deadline=None)
-@given(
-    st.floats(-np.pi, np.pi),
-    st.floats(0.5, 3.0),
-    st.floats(-np.pi, np.pi),
-    st.integers(0, 2**32 - 1),
-)
+@query_poses
 def test_keypoint_sizes_tell_the_side_where_the_elevations_cannot(
     heading_rad: float, distance_m: float, direction_rad: float, seed: int
 ) -> None:
