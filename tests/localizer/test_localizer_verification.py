@@ -306,11 +306,11 @@ def test_distance_vote_follows_the_true_translation_whatever_the_pose(
 
 def flat_views(
     rng: np.random.Generator, n: int, yaw_rad: float, t_query_in_place_m: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Verification]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Verification]:
     """``n`` points at the cameras' height (on the horizon: their elevations say nothing) seen
     from the place (origin) and the query (as :func:`two_views`): the query's and the place's
-    rays, the keypoint sizes (px) a 20 px-metre feature has at each one's distance, the pairs
-    and the true verification."""
+    rays, the keypoint sizes (px) a 20 px-metre feature has at each one's distance, and the
+    true verification (row ``i`` of each view paired)."""
     points = np.column_stack([rng.uniform(-4, 4, n), rng.uniform(-4, 4, n), np.zeros(n)])
     points[np.linalg.norm(points[:, :2], axis=1) < 0.8, :2] *= 3.0
     in_query = (points - t_query_in_place_m) @ rz(yaw_rad)
@@ -321,7 +321,7 @@ def flat_views(
     pairs = np.column_stack([np.arange(n), np.arange(n)])
     home = rz(yaw_rad).T @ (-t_query_in_place_m) / np.linalg.norm(t_query_in_place_m)
     truth = Verification(n, pairs, float(yaw_rad), rz(yaw_rad).T, home)
-    return query, place, sizes_query, sizes_place, pairs, truth
+    return query, place, sizes_query, sizes_place, truth
 
 
 @settings(max_examples=40, deadline=None)
@@ -334,7 +334,7 @@ def test_keypoint_sizes_tell_the_side_where_the_elevations_cannot(
     from localizer.verification import distance_vote
 
     t_query = distance_m * np.array([np.cos(direction_rad), np.sin(direction_rad), 0.0])
-    query, place, sizes_q, sizes_p, _, truth = flat_views(
+    query, place, sizes_q, sizes_p, truth = flat_views(
         np.random.default_rng(seed), 40, heading_rad, t_query
     )
     assert distance_vote(truth, query, place) == (0, 0.0)  # on the horizon: no elevations
@@ -350,7 +350,7 @@ def test_keypoint_sizes_on_the_floor_are_left_out() -> None:
 
     rng = np.random.default_rng(8)
     t_query = np.array([1.5, 0.0, 0.0])
-    query, place, sizes_q, sizes_p, _, truth = flat_views(rng, 20, 0.0, t_query)
+    query, place, sizes_q, sizes_p, truth = flat_views(rng, 20, 0.0, t_query)
     floor = np.column_stack([rng.uniform(-2, 2, 60), rng.uniform(-2, 2, 60), np.full(60, -1.4)])
     floor_q, floor_p = floor + t_query, floor  # seen as if from the query's mirror image
     query = np.vstack([query, floor_q / np.linalg.norm(floor_q, axis=1, keepdims=True)])
