@@ -128,7 +128,10 @@ class CalibrationSamples:
         room asked too), and when each of two rooms stands out in at least half of the other's
         queries (rooms of one place have no own count to weigh a twin against): with no door
         between them, at least ``standout_min_inliers``, ``standout_fraction`` of the own
-        room's count and ``standout_factor`` times every room but the two. A room seen
+        room's count and ``standout_factor`` times every room but the two (when each stands
+        out in the other's views: every room but the two beyond the view's walls, for the
+        rooms its doors open onto are seen, not chance; one side, where one view of two may
+        pair, keeps them in its bar). A room seen
         through a door is joined to the view's room by it (left out), one seen through two
         doors is seen with the room between them; a twin stands out alone (bare twin bedrooms
         recorded three places each: bedroom_b's views found bedroom_a at 11.7, 12.1 and 4.2
@@ -144,7 +147,14 @@ class CalibrationSamples:
         on one drive with one place per room (world seed 19): the bedrooms' views found each
         other at 12.7 and 8.0 spread inliers, every other room at most 0.9, just under the
         mutual count test's ``pair_min_inliers``; unpaired, 4 of 20 kidnappings ended sure and
-        wrong, the robot reading the twin at 63–79 spread inliers from the spot of its place."""
+        wrong, the robot reading the twin at 63–79 spread inliers from the spot of its place.
+        A building recorded so (world seed 103): office_a's view found office_b at 7.3 and the
+        corridor, through its door, at 7.0, office_b's found office_a at 13.8 and the corridor
+        at 5.5; with the corridor in the bar the offices went unpaired, and 7 of 20 robots
+        kidnapped into them were sure of the wrong one at their first look (0.97–1.0). A
+        building recorded two places per room (world seed 107): one of the storage room's two
+        views found the kitchen at 7.6, the corridor and the seminar room through its doors at
+        6.5 and 5.4; one side keeping them in its bar, the kitchen is no twin of it."""
         queries = list(queries)
         flagged: Counter[tuple[str, str]] = Counter()
         by_count: Counter[tuple[str, str]] = Counter()
@@ -153,16 +163,34 @@ class CalibrationSamples:
         both_ways: Counter[tuple[str, str]] = Counter()
         adjacent = {frozenset(edge) for edge in edges}
         asked: Counter[str] = Counter()
+
+        def stands_out(count: float, own: float, others_max: float) -> bool:
+            near = count >= max(
+                standout_min_inliers, standout_factor * others_max, standout_fraction * own
+            )
+            far = count >= max(
+                far_standout_min_inliers,
+                far_standout_factor * others_max,
+                far_standout_fraction * own,
+            )
+            return near or far
+
         for k, (own_room, best) in enumerate(queries):
             own = float(best.get(own_room, 0.0))
             seen_alike = alike[k] if k < len(alike) else ()
             asked[own_room] += 1
             rooms = [r for r in room_sizes if r != own_room]
-            chances = medians_without_each([float(best.get(r, 0.0)) for r in rooms])
-            rest = largest_without_each([float(best.get(r, 0.0)) for r in rooms])
-            for room, chance, others_max in zip(rooms, chances, rest, strict=True):
+            counts = [float(best.get(r, 0.0)) for r in rooms]
+            chances = medians_without_each(counts)
+            rest = largest_without_each(counts)
+            beyond = [frozenset((own_room, r)) not in adjacent for r in rooms]
+            rest_beyond = largest_without_each(
+                [c if far_off else 0.0 for c, far_off in zip(counts, beyond, strict=True)]
+            )
+            for room, count, chance, others_max, beyond_max in zip(
+                rooms, counts, chances, rest, rest_beyond, strict=True
+            ):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
-                count = float(best.get(room, 0.0))
                 counted = count >= bar
                 by_count[(own_room, room)] += counted
                 # rooms joined by a door see each other through it: their counts pair them
@@ -171,17 +199,11 @@ class CalibrationSamples:
                 # one side may pair only a view its own room verified, from beyond a wall
                 one_side = own > 0 and room_sizes.get(own_room, 0) >= 2 and not through_door
                 outdone[(own_room, room)] += one_side and counted and count >= own
-                near = count >= max(
-                    standout_min_inliers, standout_factor * others_max, standout_fraction * own
-                )
-                far = count >= max(
-                    far_standout_min_inliers,
-                    far_standout_factor * others_max,
-                    far_standout_fraction * own,
-                )
-                stands = not through_door and (near or far)
-                standing_out[(own_room, room)] += one_side and stands
-                both_ways[(own_room, room)] += stands
+                if not through_door:
+                    standing_out[(own_room, room)] += one_side and stands_out(
+                        count, own, others_max
+                    )
+                    both_ways[(own_room, room)] += stands_out(count, own, beyond_max)
                 if (counted and not through_door) or room in seen_alike:
                     flagged[(own_room, room)] += 1
         # twins explain most of each other's views; a room seen through a door explains only

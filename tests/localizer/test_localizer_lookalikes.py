@@ -576,6 +576,52 @@ def test_rooms_of_one_place_joined_by_a_door_never_stand_out_as_look_alikes():
     assert samples.lookalike_pairs == ()
 
 
+# a building recorded on one drive, one place per room (world seed 103): each office's view
+# finds the other office above chance, and the corridor, seen through both doors, as high
+ONE_PLACE_OFFICES = [
+    ("office_a", {"office_b": 7.3, "corridor": 7.0, "kitchen": 2.4, "seminar": 1.4}),
+    ("office_b", {"office_a": 13.8, "corridor": 5.5, "seminar": 2.7, "kitchen": 2.1}),
+    ("corridor", {"office_a": 5.1, "office_b": 3.3, "seminar": 3.3, "kitchen": 2.6}),
+]
+ONE_PLACE_BUILDING = dict.fromkeys(["office_a", "office_b", "corridor", "kitchen", "seminar"], 1)
+CORRIDOR_DOORS = [("corridor", room) for room in ("office_a", "office_b", "kitchen", "seminar")]
+
+
+def test_rooms_of_one_place_stand_out_of_chance_not_of_the_room_seen_through_their_door():
+    from localizer.likelihood_fit import CalibrationSamples
+
+    samples = CalibrationSamples.from_queries(
+        ONE_PLACE_OFFICES, ONE_PLACE_BUILDING, edges=CORRIDOR_DOORS
+    )
+    assert samples.lookalike_pairs == (("office_a", "office_b"),)
+    assert samples.pair_tests == ("standout",)
+
+
+def test_a_room_seen_through_no_door_as_high_as_the_twin_keeps_it_from_standing_out():
+    from localizer.likelihood_fit import CalibrationSamples
+
+    # the same views with the corridor joined to no room: as high as the twin, it is chance
+    samples = CalibrationSamples.from_queries(ONE_PLACE_OFFICES, ONE_PLACE_BUILDING)
+    assert samples.lookalike_pairs == ()
+
+
+def test_one_view_of_a_room_stands_out_only_of_every_other_room_the_door_rooms_too():
+    from localizer.likelihood_fit import CalibrationSamples
+
+    # a building recorded two places per room (world seed 107): one of the storage room's
+    # views finds the kitchen above every room but the two it opens onto; one view is half of
+    # its room's views, and one side pairs only what stands out of them too
+    views = [
+        ("kitchen", {"kitchen": 98.7, "storage": 6.9, "corridor": 4.8, "office_b": 4.8}),
+        ("kitchen", {"kitchen": 99.1, "office_b": 12.9, "office_a": 4.6, "storage": 1.5}),
+        ("storage", {"storage": 4.2, "corridor": 2.3, "office_b": 2.3, "kitchen": 0.3}),
+        ("storage", {"kitchen": 7.6, "corridor": 6.5, "seminar": 5.4, "storage": 4.2}),
+    ]
+    sizes = dict.fromkeys(["kitchen", "storage", "corridor", "seminar", "office_a", "office_b"], 2)
+    doors = [("corridor", "kitchen"), ("corridor", "storage"), ("seminar", "storage")]
+    assert CalibrationSamples.from_queries(views, sizes, edges=doors).lookalike_pairs == ()
+
+
 def test_twins_read_on_a_counterpart_pair_at_chance_stay_aliased():
     # robot in office_a near its door: office_b's nearest place verified 14, the one
     # counterpart pair (3, 13) only 2 and 1: chance, which says nothing about which twin
