@@ -14,11 +14,12 @@ import pytest
 from robot_helpers import RobotWrapper
 
 from localizer.active import ActiveParams, localize_actively
-from localizer.belief import LocalizationState, StateThresholds, top_two_ratio
+from localizer.belief import LocalizationState, RoomBelief, StateThresholds, top_two_ratio
 from localizer.loaded_map import LoadedMap
 from localizer.localizer import Localizer
 from localizer.robot_protocol import Capture, MoveResult
 from localizer.route_checks import RouteCheckParams, check_route
+from localizer.route_choice import route_to_check
 from localizer.routes import route_out
 from localizer.visual_homing import HomingResult, drive_home
 from mapdb.database import MapDatabase
@@ -528,6 +529,28 @@ def test_of_twins_with_routes_beyond_only_the_one_with_the_shorter_takes_it(driv
         for check in result.checks
     }
     assert legs == {"office_a": ("corridor", "kitchen"), "office_b": (None, "kitchen")}
+
+
+def test_a_twin_is_checked_once_its_rival_took_the_route_beyond_before_less_likely_rooms(
+    driven_to_kitchen,
+):
+    """office_b's route beyond told for the pair and missed: office_a, now likeliest, is
+    checked next (by its short route into the corridor), not the corridor seen on the way
+    (world seed 103's building, one place per room: a robot in office_a checked the corridor
+    instead, and ended ambiguous at the drive limit)."""
+    loaded = load_map(driven_to_kitchen)
+    localizer = Localizer(loaded)
+    robot = SimulatedRobot.kidnapped(make_world("building"), "office_a", seed=5, camera=CAMERA)
+    look = localizer.observe(robot.capture().image)
+    rooms = loaded.rooms
+    p = {"office_a": 0.745, "office_b": 0.166, "corridor": 0.089}
+    belief = RoomBelief.from_probabilities(rooms, np.array([p.get(r, 0.0) for r in rooms]))
+    office_b = {place.id for place in loaded.places if place.room == "office_b"}
+    params = RouteCheckParams()
+    first = route_to_check(localizer, belief, look, set(), {}, params)
+    assert first is not None and first[0].room == "office_b"
+    after = route_to_check(localizer, belief, look, office_b, {"office_b": 1}, params)
+    assert after is not None and after[0].room == "office_a"
 
 
 def test_a_check_into_a_hall_that_repeats_is_told_by_the_drive_on_beyond_it(driven_to_kitchen):
