@@ -183,19 +183,18 @@ class CalibrationSamples:
             counts = [float(best.get(r, 0.0)) for r in rooms]
             chances = medians_without_each(counts)
             rest = largest_without_each(counts)
-            beyond = [frozenset((own_room, r)) not in adjacent for r in rooms]
+            doors = [frozenset((own_room, r)) in adjacent for r in rooms]
             rest_beyond = largest_without_each(
-                [c if far_off else 0.0 for c, far_off in zip(counts, beyond, strict=True)]
+                [0.0 if door else c for c, door in zip(counts, doors, strict=True)]
             )
-            for room, count, chance, others_max, beyond_max in zip(
-                rooms, counts, chances, rest, rest_beyond, strict=True
+            for room, count, chance, others_max, beyond_max, through_door in zip(
+                rooms, counts, chances, rest, rest_beyond, doors, strict=True
             ):
                 bar = max(pair_min_inliers, pair_fraction * own, pair_chance_factor * chance)
                 counted = count >= bar
                 by_count[(own_room, room)] += counted
-                # rooms joined by a door see each other through it: their counts pair them
-                # neither from one side nor mutually (appearance leaves them out too)
-                through_door = frozenset((own_room, room)) in adjacent
+                # rooms joined by a door (through_door) see each other through it: their counts
+                # pair them neither from one side nor mutually (appearance leaves them out too)
                 # one side may pair only a view its own room verified, from beyond a wall
                 one_side = own > 0 and room_sizes.get(own_room, 0) >= 2 and not through_door
                 outdone[(own_room, room)] += one_side and counted and count >= own
