@@ -7,6 +7,8 @@ this prints:
 - the eq. 5.6 score of ``thesis`` (true headings), of ``best``, and of the verified axis with
   the sign the truth would give (``oracle sign``: how much a better sign could gain; pairs
   without geometry take the matched ALV);
+- the score of ``best`` with the general 5-point pose instead of the planar one (``general
+  pose``: ``best`` before session 46; :data:`localizer.visual_homing.HOMING_VERIFICATION`);
 - the score of ``best`` without the keypoint sizes (``without sizes``: the distance vote from
   the elevations alone, as on a map stored before schema version 5) and with the four votes
   of sessions 28-43 (``four votes``: the elevations' vote counted as one of four, beside the
@@ -23,8 +25,12 @@ distance apart, the verification's inliers, the two methods' errors and the axis
 sign vote (+1: the axis as verified, -1: its opposite; the distance vote with its
 t-statistic) beside the sign the truth gives.
 
-Run: ``python benchmarks/bench_homing_signs.py [--per-pair] DATASET [DATASET ...]``;
-docs/homing.md names the datasets it was run on.
+With ``--tilt-deg T``, every other place's panorama (odd rows of the manifest) is rolled by T
+degrees about its forward axis before the poses are solved (its rays turned: a camera mounted
+or held out of level; the thesis method reads only bearings and stays as it is).
+
+Run: ``python benchmarks/bench_homing_signs.py [--per-pair] [--tilt-deg T] DATASET [DATASET
+...]``; docs/homing.md names the datasets it was run on.
 """
 
 from __future__ import annotations
@@ -39,8 +45,18 @@ from homing.alv import alv_from_bearings
 from homing.bearings import wrap_angle_rad
 from homing.home_directions import alv_home_directions_rad
 from homing.thesis.evaluation import pair_errors_deg, true_home_direction_rad
-from localizer.verification import cheirality_sign, distance_vote, home_direction_rad
-from localizer.visual_homing import DISTANCE_VOTE_MIN_T, signed_pose_direction_rad
+from localizer.verification import (
+    VerificationParams,
+    cheirality_sign,
+    distance_vote,
+    home_direction_rad,
+)
+from localizer.visual_homing import (
+    DISTANCE_VOTE_MIN_T,
+    HOMING_VERIFICATION,
+    signed_pose_direction_rad,
+)
+from mapdb.records import Fingerprint
 from toploc.evaluation.homing import (
     FeatureSettings,
     PairCache,
@@ -60,12 +76,28 @@ def score(errors_deg: np.ndarray) -> float:
     return float(1.0 - np.mean(np.abs(np.where(np.isnan(errors_deg), 90.0, errors_deg))) / 180.0)
 
 
-def run(dataset: Path, per_pair: bool = False) -> None:
+class TiltedPairCache(PairCache):
+    """A :class:`PairCache` whose odd-numbered panoramas are rolled by ``tilt_deg`` degrees
+    about their forward (x) axis."""
+
+    def __init__(
+        self, fingerprints: list[Fingerprint], tilt_deg: float, params: VerificationParams
+    ) -> None:
+        super().__init__(fingerprints, params=params)
+        c, s = math.cos(math.radians(tilt_deg)), math.sin(math.radians(tilt_deg))
+        self.roll = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+    def rays(self, i: int) -> np.ndarray:
+        rays = super().rays(i)
+        return rays @ self.roll.T if i % 2 else rays
+
+
+def run(dataset: Path, per_pair: bool = False, tilt_deg: float = 0.0) -> None:
     places = load_places(dataset)
     fingerprints = extract_fingerprints(
         [dataset / p.image for p in places], FeatureSettings(), workers=2
     )
-    cache = PairCache(fingerprints)
+    cache = TiltedPairCache(fingerprints, tilt_deg, HOMING_VERIFICATION)
     pairs = same_room_pairs([p.room for p in places])
     positions, headings = positions_m(places), headings_rad(places)
     truth = true_home_direction_rad(positions[pairs[:, 0]], positions[pairs[:, 1]])
@@ -76,6 +108,8 @@ def run(dataset: Path, per_pair: bool = False) -> None:
     thesis = errors(_home_directions("thesis", places, cache, pairs))
     best = _home_directions("pose-vote", places, cache, pairs)
     best_errors = errors(best)
+    general_cache = TiltedPairCache(fingerprints, tilt_deg, VerificationParams(motion="general"))
+    general = errors(_home_directions("pose-vote", places, general_cache, pairs))
     matched = _home_directions("matched-alv", places, cache, pairs)
     alvs = [alv_from_bearings(f.bearings_rad) for f in fingerprints]
     oracle, without_sizes, four_votes = best.copy(), best.copy(), best.copy()
@@ -140,9 +174,11 @@ def run(dataset: Path, per_pair: bool = False) -> None:
             if math.isfinite(d):
                 votes[name].append(side_of(d, axis) == right)
     shares = ", ".join(f"{name} {np.mean(v):.0%} of {len(v)}" for name, v in votes.items() if v)
+    name = f"{dataset.name} rolled {tilt_deg:g} deg" if tilt_deg else dataset.name
     print(
-        f"{dataset.name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
-        f"{score(best_errors):.3f}, oracle sign {score(errors(oracle)):.3f}, without sizes "
+        f"{name}: {len(pairs)} pairs; thesis {score(thesis):.3f}, best "
+        f"{score(best_errors):.3f}, general pose {score(general):.3f}, oracle sign "
+        f"{score(errors(oracle)):.3f}, without sizes "
         f"{score(errors(without_sizes)):.3f}, four votes {score(errors(four_votes)):.3f}; "
         f"yaw error median {np.median(yaw_errors_deg):.1f} deg; "
         f"{len(votes['cheirality'])} pairs with the axis within "
@@ -176,9 +212,12 @@ def main() -> None:
     parser.add_argument(
         "--per-pair", action="store_true", help="also each pair where best errs more than thesis"
     )
+    parser.add_argument(
+        "--tilt-deg", type=float, default=0.0, help="roll every other panorama by this (degrees)"
+    )
     args = parser.parse_args()
     for dataset in args.datasets:
-        run(dataset, args.per_pair)
+        run(dataset, args.per_pair, args.tilt_deg)
 
 
 if __name__ == "__main__":

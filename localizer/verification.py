@@ -46,6 +46,7 @@ from homing.bearings import wrap_angle_rad
 from localizer.planar import estimate_planar_pose, triangulated_depths
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
+MOTIONS: tuple[str, ...] = ("general", "planar", "planar-refined")
 
 
 @dataclass(frozen=True)
@@ -56,9 +57,11 @@ class VerificationParams:
     1024-px panorama is 0.0061 rad). ``min_correspondences``: fewer pairs give 0 inliers without
     running RANSAC (at least 5). ``seed``: RANSAC's random seed (deterministic results).
     ``min_trials``/``max_trials``/``confidence``: pycolmap's RANSAC stopping rule.
-    ``motion``: ``"general"`` (pycolmap's 5-point essential matrix: any relative pose) or
+    ``motion``: ``"general"`` (pycolmap's 5-point essential matrix: any relative pose),
     ``"planar"`` (:mod:`localizer.planar`: a yaw and a horizontal translation, for a camera
-    that moves on the floor without tilting; ``planar_trials`` 2-pair samples).
+    that moves on the floor without tilting; ``planar_trials`` 2-pair samples) or
+    ``"planar-refined"`` (the planar pose refined to any relative pose on its inliers,
+    :func:`refined_planar_pose`: a camera that tilts a degree or two).
     """
 
     max_error_rad: float = 0.01
@@ -84,8 +87,8 @@ class VerificationParams:
             )
         if not 0 < self.confidence < 1:
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
-        if self.motion not in ("general", "planar"):
-            raise ValueError(f"motion must be general or planar, got {self.motion!r}")
+        if self.motion not in MOTIONS:
+            raise ValueError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
         if self.planar_trials < 1:
             raise ValueError(f"planar_trials must be >= 1, got {self.planar_trials}")
         if self.seed < 0:
@@ -217,17 +220,53 @@ def _relative_pose(
     x_place: np.ndarray, x_query: np.ndarray, params: VerificationParams
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """``(R_query_from_place, t)`` by the configured solver, or None."""
-    if params.motion == "planar":
+    if params.motion in ("planar", "planar-refined"):
         planar = estimate_planar_pose(
             x_place, x_query, params.max_error_rad, params.seed, params.planar_trials
         )
-        return None if planar is None else (planar.rotation, planar.translation)
+        if planar is None:
+            return None
+        if params.motion == "planar":
+            return planar.rotation, planar.translation
+        return refined_planar_pose(
+            planar.rotation, planar.translation, x_place, x_query, params.max_error_rad
+        )
     result = pycolmap.estimate_relative_pose(x_place, x_query, params.ransac_options())
     if result is None:
         return None
     pose = result["cam2_from_cam1"]
     rotation = np.asarray(pose.rotation.matrix(), dtype=np.float64)
     return rotation, np.asarray(pose.translation, dtype=np.float64)
+
+
+def refined_planar_pose(
+    rotation: np.ndarray,
+    translation_dir: np.ndarray,
+    x_place: np.ndarray,
+    x_query: np.ndarray,
+    max_error_rad: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A planar pose (``R_query_from_place``, unit ``t``; :mod:`localizer.planar`) refined to
+    any relative pose by pycolmap's least squares on the tangent Sampson error of the ray
+    pairs (n, 3) that are its inliers within ``max_error_rad``; the planar pose itself if fewer
+    than :data:`MIN_CORRESPONDENCES` are, or the refinement fails.
+
+    The planar RANSAC picks which geometry the matches fit: on a scene whose inliers mostly lie
+    on the floor, the 5-point solver finds a wrong axis as readily as the right one, and only
+    the right one is a yaw and a horizontal translation. The refinement then takes in a tilt of
+    the camera of a degree or two, under which the planar model's own axis errs (rolling every
+    other panorama of rendered bare houses by 1-2°: docs/homing.md)."""
+    mask = inlier_mask(rotation, translation_dir, x_place, x_query, max_error_rad)
+    if int(mask.sum()) < MIN_CORRESPONDENCES:
+        return rotation, translation_dir
+    start = pycolmap.Rigid3d(pycolmap.Rotation3d(rotation), translation_dir)
+    result = pycolmap.refine_relative_pose(start, x_place, x_query, mask[:, None])
+    if result is None:
+        return rotation, translation_dir
+    pose = result["cam2_from_cam1"]
+    return np.asarray(pose.rotation.matrix(), dtype=np.float64), np.asarray(
+        pose.translation, dtype=np.float64
+    )
 
 
 def verify(

@@ -15,16 +15,16 @@ to go but is not metres). Three variants:
   over the inliers only, in both views (the same landmarks here and at the goal):
   :func:`homing.alv.matched_home_vector`.
 - ``"pose"``: the direction from the relative pose that the localizer's verification finds on
-  the same descriptor matches (:func:`localizer.verification.verify`): the axis of its
-  translation, which is precise, with the sign that the inliers' change of distance gives
-  where it is significant (their elevations and their keypoints' sizes), else the sign most
-  of three votes give: the pose's cheirality counted on the inliers above the floor, the
-  matched ALV and the ALV of all features with the pose's yaw as the compass
-  (:func:`signed_pose_direction_rad`; ``toploc eval homing --method pose-vote``). The step
-  length and the arrival test are the matched ALV's, as for "best"; without a translation
-  axis the step is "best"'s. The default: the method ``toploc eval homing --method best``
-  scores, and on maps recorded on one drive (world seed 22, two places per room) the active
-  loop with it ended right and localized where the robot was put 18 and 15 times of 20
+  the same descriptor matches (:func:`localizer.verification.verify`), solved for planar motion
+  (:data:`HOMING_VERIFICATION`): the axis of its translation, which is precise, with the sign
+  that the inliers' change of distance gives where it is significant (their elevations and their
+  keypoints' sizes), else the sign most of three votes give: the pose's cheirality counted on
+  the inliers above the floor, the matched ALV and the ALV of all features with the pose's yaw
+  as the compass (:func:`signed_pose_direction_rad`; ``toploc eval homing --method pose-vote``).
+  The step length and the arrival test are the matched ALV's, as for "best"; without a
+  translation axis the step is "best"'s. The default: the method ``toploc eval homing --method
+  best`` scores, and on maps recorded on one drive (world seed 22, two places per room) the
+  active loop with it ended right and localized where the robot was put 18 and 15 times of 20
   (building, house), 15 and 10 with "best"; on world seed 23, 17 and 14 against 16 and 11.
 
 The loop (:func:`drive_home`) is generic over :class:`localizer.robot_protocol.Robot`: capture,
@@ -70,6 +70,7 @@ from localizer.features import extract_preset, extract_with_camera
 from localizer.matching import match_descriptors
 from localizer.verification import (
     Verification,
+    VerificationParams,
     cheirality_sign,
     distance_vote,
     home_direction_rad,
@@ -84,6 +85,14 @@ DISTANCE_VOTE_MIN_T = 2.0
 """The distance vote (:func:`localizer.verification.distance_vote`) sets the "pose" variant's
 sign when its t-statistic is at least this (chosen on bare houses 1.5-3 m, the tiled square
 and building rooms and corridors: docs/homing.md)."""
+
+HOMING_VERIFICATION = VerificationParams(motion="planar-refined")
+"""The relative pose the "pose" variant takes its axis from: the planar pose (a yaw and a
+horizontal translation, :mod:`localizer.planar`; the robot's camera moves on the floor) refined
+to any pose on its inliers (:func:`localizer.verification.refined_planar_pose`). The general
+5-point pose fits a scene whose inliers mostly lie on one plane (the floor of a bare room) with
+a wrong axis as readily as the right one; the planar model admits only the right one, and the
+refinement takes in a camera tilted a degree or two (docs/homing.md)."""
 
 HomingVariant = Literal["thesis", "best", "pose"]
 VARIANTS: tuple[str, ...] = ("thesis", "best", "pose")
@@ -276,7 +285,7 @@ def _pose_step(
     matches = match_descriptors(current.descriptors, goal.descriptors, params.ratio)
     matched = _best_step(current, goal, params, shift_rad, matches)
     rays_here, rays_goal = current.rays(), goal.rays()
-    verification = verify(rays_here, rays_goal, matches)
+    verification = verify(rays_here, rays_goal, matches, HOMING_VERIFICATION)
     if math.isnan(home_direction_rad(verification)):
         return matched
     direction = signed_pose_direction_rad(

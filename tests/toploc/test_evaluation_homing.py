@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from homing.alv import HomingError
 from localizer.panorama_io import PanoramaError
 from robot.dataset import render_dataset
 from robot.render import PanoramaCamera
@@ -324,6 +325,30 @@ def test_pose_vote_is_best_and_homes(dataset, fingerprints) -> None:
     np.testing.assert_allclose(run.errors_deg, pose_vote.errors_deg)
     assert run.stats.n_failed == 0
     assert run.stats.mean_deg < 60.0 and run.stats.under_90 > 0.8  # chance: 90 deg, 50 %
+
+
+def test_the_closed_loop_steps_along_the_axis_eval_homing_best_scores(dataset, fingerprints):
+    """The drive (:func:`localizer.visual_homing.home_step`) and ``eval homing --method best``
+    solve the same pose (planar, refined: ``HOMING_VERIFICATION``), so they home along one
+    axis; the sign's votes are their own (the matched ALV is estimated a little apart)."""
+    from localizer.visual_homing import HOMING_VERIFICATION, home_step
+
+    places, fps = load_places(dataset), fingerprints["sift"]
+    run = evaluate_homing(places, fps, "best")
+    assert PairCache(fps).params == HOMING_VERIFICATION
+    assert HOMING_VERIFICATION.motion == "planar-refined"
+    compared = 0
+    for k in range(0, len(run.here), max(1, len(run.here) // 24)):
+        if run.here[k] > run.home[k]:
+            continue  # the evaluation solves each pair once, the lower row as the query
+        try:
+            step = home_step(fps[run.here[k]], fps[run.home[k]])
+        except HomingError:  # too few matches to drive on: the loop turns away and looks again
+            continue
+        turn = np.remainder(step.direction_rad - run.home_direction_rad[k], np.pi)
+        assert min(turn, np.pi - turn) < 1e-6
+        compared += 1
+    assert compared >= 6
 
 
 def test_pose_vote_keeps_the_axis_of_the_pose(dataset, fingerprints) -> None:

@@ -14,9 +14,10 @@ manifest (section 5.6). The others work without headings:
 * ``"matched-vote"``: the home direction in the most wedges of matched features (see
   :func:`homing.home_directions.wedge_vote_direction_rad`), the rotation as for ``matched-alv``;
 * ``"pose"``: the direction of the translation of the relative pose that the essential-matrix
-  verification finds on the matched rays (:func:`localizer.verification.verify`, the same as
-  the localizer's evidence; :func:`localizer.verification.home_direction_rad`), falling back
-  to ``"matched-alv"`` when the verification finds no geometry;
+  verification finds on the matched rays (:func:`localizer.verification.verify`, solved for
+  planar motion as the closed loop does: :data:`localizer.visual_homing.HOMING_VERIFICATION`;
+  :func:`localizer.verification.home_direction_rad`), falling back to ``"matched-alv"`` when
+  the verification finds no geometry; every ``pose*`` method takes this pose;
 * ``"pose-alv"``: the axis of that translation, signed to agree with ``"matched-alv"`` (within
   90° of it), when the verification has at least ``POSE_MIN_INLIERS`` inliers; else
   ``"matched-alv"``. The essential matrix fixes the axis of motion well, but its sign comes
@@ -84,12 +85,17 @@ from localizer.matching import match_descriptors
 from localizer.panorama_io import read_panorama
 from localizer.verification import (
     Verification,
+    VerificationParams,
     above_floor,
     cheirality_sign,
     home_direction_rad,
     verify,
 )
-from localizer.visual_homing import counted_distance_vote, signed_pose_direction_rad
+from localizer.visual_homing import (
+    HOMING_VERIFICATION,
+    counted_distance_vote,
+    signed_pose_direction_rad,
+)
 from mapdb.dataset import ManifestEntry, read_manifest
 from mapdb.records import Fingerprint
 from mapdb.workers import results_in_order, spawn_process_pool
@@ -226,12 +232,19 @@ class PairCache:
 
     ``matches(a, b)`` are ``[row in a, row in b]``; ``verification(a, b)`` has ``a`` as the
     query and ``b`` as the place (its ``translation_dir`` points from ``a`` to ``b`` in ``a``'s
-    robot frame, see :mod:`localizer.verification`).
+    robot frame, see :mod:`localizer.verification`). ``params``: the verification's (the
+    closed loop's planar pose by default).
     """
 
-    def __init__(self, fingerprints: Sequence[Fingerprint], progress: bool = False) -> None:
+    def __init__(
+        self,
+        fingerprints: Sequence[Fingerprint],
+        progress: bool = False,
+        params: VerificationParams = HOMING_VERIFICATION,
+    ) -> None:
         self.fingerprints = tuple(fingerprints)
         self.progress = progress
+        self.params = params
         self._matches: dict[tuple[int, int], np.ndarray] = {}
         self._verifications: dict[tuple[int, int, bool], Verification] = {}
         self._rays: dict[int, np.ndarray] = {}
@@ -278,7 +291,7 @@ class PairCache:
             matches = self.matches(i, j)
             if not floor:
                 matches = above_floor(rays_i, rays_j, matches)
-            self._verifications[(i, j, floor)] = verify(rays_i, rays_j, matches)
+            self._verifications[(i, j, floor)] = verify(rays_i, rays_j, matches, self.params)
         v = self._verifications[(i, j, floor)]
         return v if a <= b else v.swapped()
 
