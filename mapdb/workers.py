@@ -160,12 +160,18 @@ class WorkerPool(ProcessPoolExecutor):
     def named(self, error: BrokenProcessPool) -> BrokenProcessPool:
         """``error`` as a :class:`WorkerDiedError` naming the worker that ended, when the pool
         noticed it first and said only "A child process terminated abruptly" (which of the two
-        notices first is a race); ``error`` itself if it names one already or none has ended.
+        notices first is a race); ``error`` itself if it names one already or none has ended within a second.
         The pool terminates the other workers once it finds one ended: a worker not ended by
         ``SIGTERM`` is the one that died."""
         if isinstance(error, WorkerDiedError):
             return error
         ended = self._ended()
+        deadline = time.monotonic() + 1.0
+        while not ended and time.monotonic() < deadline:
+            # The pool's own thread may be reaping the worker this moment: one thread reads its
+            # exit status, and another asking meanwhile sees none yet. Let that thread finish.
+            time.sleep(0.01)
+            ended = self._ended()
         died = [(pid, code) for pid, code in ended if code != -signal.SIGTERM] or ended
         return WorkerDiedError(*died[0]) if died else error
 
