@@ -160,9 +160,9 @@ class WorkerPool(ProcessPoolExecutor):
     def named(self, error: BrokenProcessPool) -> BrokenProcessPool:
         """``error`` as a :class:`WorkerDiedError` naming the worker that ended, when the pool
         noticed it first and said only "A child process terminated abruptly" (which of the two
-        notices first is a race); ``error`` itself if it names one already or none has ended within a second.
-        The pool terminates the other workers once it finds one ended: a worker not ended by
-        ``SIGTERM`` is the one that died."""
+        notices first is a race); ``error`` itself if it names one already or none has ended
+        within a second. The pool terminates the other workers once it finds one ended: a
+        worker not ended by ``SIGTERM`` is the one that died."""
         if isinstance(error, WorkerDiedError):
             return error
         ended = self._ended()
