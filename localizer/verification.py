@@ -46,7 +46,7 @@ from homing.bearings import wrap_angle_rad
 from localizer.planar import estimate_planar_pose, triangulated_depths
 
 MIN_CORRESPONDENCES = 5  # the 5-point solver's minimal sample
-MOTIONS: tuple[str, ...] = ("general", "planar", "planar-refined")
+POSE_MOTIONS: tuple[str, ...] = ("general", "planar", "planar-refined")  # VerificationParams.motion
 
 
 @dataclass(frozen=True)
@@ -87,8 +87,8 @@ class VerificationParams:
             )
         if not 0 < self.confidence < 1:
             raise ValueError(f"confidence must be in (0, 1), got {self.confidence!r}")
-        if self.motion not in MOTIONS:
-            raise ValueError(f"motion must be one of {MOTIONS}, got {self.motion!r}")
+        if self.motion not in POSE_MOTIONS:
+            raise ValueError(f"motion must be one of {POSE_MOTIONS}, got {self.motion!r}")
         if self.planar_trials < 1:
             raise ValueError(f"planar_trials must be >= 1, got {self.planar_trials}")
         if self.seed < 0:
