@@ -83,6 +83,20 @@ def test_fewer_than_two_pairs_give_no_pose() -> None:
         VerificationParams(motion="flying")
 
 
+def roll_x(roll_deg: float) -> np.ndarray:
+    """The rotation by ``roll_deg`` degrees about the forward (x) axis."""
+    c, s = np.cos(np.radians(roll_deg)), np.sin(np.radians(roll_deg))
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def in_rolled_query(
+    points: np.ndarray, yaw_rad: float, t_query_in_place_m: np.ndarray, roll_deg: float
+) -> np.ndarray:
+    """``points`` (n, 3) of the place's frame in the frame of a query turned by ``yaw_rad``,
+    moved to ``t_query_in_place_m`` and rolled by ``roll_deg`` degrees."""
+    return (points - t_query_in_place_m) @ rz(yaw_rad) @ roll_x(roll_deg)
+
+
 def rolled_floor_views(
     rng: np.random.Generator, yaw_rad: float, t_query_in_place_m: np.ndarray, roll_deg: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -94,9 +108,7 @@ def rolled_floor_views(
         [radius * np.cos(azimuth), radius * np.sin(azimuth), np.full(80, -1.4)]
     )
     place = points / np.linalg.norm(points, axis=1, keepdims=True)
-    c, s = np.cos(np.radians(roll_deg)), np.sin(np.radians(roll_deg))
-    roll = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    in_query = (points - t_query_in_place_m) @ rz(yaw_rad) @ roll
+    in_query = in_rolled_query(points, yaw_rad, t_query_in_place_m, roll_deg)
     query = in_query / np.linalg.norm(in_query, axis=1, keepdims=True)
     query = query + rng.normal(scale=0.002, size=query.shape)
     query /= np.linalg.norm(query, axis=1, keepdims=True)
@@ -117,10 +129,7 @@ def test_the_refined_planar_pose_takes_in_a_camera_out_of_level(
     t = distance_m * np.array([np.cos(heading_rad), np.sin(heading_rad), 0.0])
     query, place, pairs = rolled_floor_views(np.random.default_rng(seed), yaw_rad, t, roll_deg)
     refined = verify(query, place, pairs, VerificationParams(motion="planar-refined"))
-    # the place's centre seen from the query: -(R_place_from_query^T t), then rolled
-    roll = np.radians(roll_deg)
-    home = np.array([[1, 0, 0], [0, np.cos(roll), np.sin(roll)], [0, -np.sin(roll), np.cos(roll)]])
-    home = home @ (-(rz(yaw_rad).T @ t))
+    home = in_rolled_query(np.zeros((1, 3)), yaw_rad, t, roll_deg)[0]  # the place's centre
     turn = np.remainder(home_direction_rad(refined) - np.arctan2(home[1], home[0]), np.pi)
     assert min(turn, np.pi - turn) < np.radians(1.0)  # the axis
     tilt_deg = np.degrees(np.arccos(min(1.0, refined.rotation[2, 2])))
