@@ -201,8 +201,9 @@ class StateThresholds:
       its leave-one-out of twin offices is wrong by construction). docs/results.md.
     - ``min_coverage = 0.6``: and the latest frame's inliers with the top room's places, all
       of them together, cover at least this share of the horizon
-      (:data:`localizer.evidence.ALL_ROUND_COVERAGE`); otherwise ``ambiguous`` (the localizer
-      applies it, :meth:`Localizer.belief`). A robot in a doorway, or in the next room
+      (:data:`localizer.evidence.ALL_ROUND_COVERAGE`), or the frame was taken on one of its
+      places; otherwise ``ambiguous`` (the localizer applies it, :meth:`Localizer.belief`).
+      A robot in a doorway, or in the next room
       looking through the door, sees a room on half the horizon or less: on recorded maps of
       ``building`` with one place per room, robots just inside an office said ``localized``
       in the corridor at 0.97 from the corridor's place at 43 and 57 inliers covering 0.51

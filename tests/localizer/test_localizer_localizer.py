@@ -157,15 +157,21 @@ def test_a_room_of_one_place_must_win_by_more_to_be_localized(top_room: str, sta
     assert localizer.map.places_per_room == {"attic": 1, "cellar": 2}
 
 
-def frame_seeing(localizer: Localizer, seen: dict[int, tuple[float, float]]):
+def frame_seeing(
+    localizer: Localizer, seen: dict[int, tuple[float, float]], on_place: int | None = None
+):
     """An observation whose evidence is, for each place id of ``seen``, 60 inliers on the
-    frame's keypoints whose azimuths lie in the arc ``(from_deg, to_deg)`` of the horizon (the
-    frame is place 1's fingerprint; its first 100 keypoints only, so that any place's may stand
-    in for it)."""
+    frame's keypoints whose azimuths lie in the arc ``(from_deg, to_deg)`` of the horizon (its
+    first 100 keypoints only). The frame is place ``on_place``'s own view, or, if None, a view
+    of random texture taken on none of the map's places."""
     from localizer.evidence import PlaceEvidence, QueryEvidence, azimuth_coverage
     from localizer.localizer import Observation
 
-    fingerprint = localizer.map.fingerprint(1)
+    if on_place is None:
+        image = np.random.default_rng(4).integers(0, 256, (96, 384), dtype=np.uint8)
+        fingerprint = extract_with_camera(image, CameraSpec(), "sift")
+    else:
+        fingerprint = localizer.map.fingerprint(on_place)
     rays = fingerprint.rays()
     azimuth_deg = np.degrees(np.arctan2(rays[:100, 1], rays[:100, 0])) % 360.0
     items = []
@@ -212,6 +218,23 @@ def test_a_room_whose_places_are_each_seen_on_half_the_horizon_is_seen_all_round
     localizer.latest = frame_seeing(localizer, {2: (0.0, 170.0), 3: (180.0, 350.0)})
     assert localizer.belief().state is LocalizationState.LOCALIZED
     assert localizer.unseen_room() is None
+
+
+@pytest.mark.parametrize(("on_place", "state"), [(2, "localized"), (None, "ambiguous")])
+def test_a_frame_on_one_of_a_rooms_places_sees_that_room_enough_on_part_of_the_horizon(
+    on_place, state
+):
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"cellar": 100.0, "attic": 1.0})
+    localizer.latest = frame_seeing(localizer, {2: (0.0, 130.0)}, on_place=on_place)
+    assert localizer.belief().state is LocalizationState(state)
+
+
+def test_a_frame_on_a_place_of_another_room_does_not_count_as_on_the_likely_rooms_place():
+    localizer = Localizer(one_and_two_place_map())
+    localizer.reset({"cellar": 100.0, "attic": 1.0})
+    localizer.latest = frame_seeing(localizer, {2: (0.0, 130.0), 1: (0.0, 60.0)}, on_place=1)
+    assert localizer.belief().state is LocalizationState.AMBIGUOUS
 
 
 def frame_odds(localizer: Localizer, frame) -> float:

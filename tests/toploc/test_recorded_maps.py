@@ -853,9 +853,10 @@ def test_a_loop_held_back_only_by_a_one_place_room_seen_from_afar_ends_with_a_lo
     ratio, but it stands where bathroom_b's one place covers little of its horizon. Rather
     than end ambiguous with no telling place left, it homes to that place to look from there
     (here that homing ends short of it, and the belief stays ambiguous, right). Seed 0 was
-    this case until homing took the planar pose (session 46): it now ends localized sooner."""
+    this case until homing took the planar pose (session 46), seed 5 until a frame on a place
+    of the room counted as seeing it (session 47): both now end localized sooner."""
     loaded = load_map(twin_wings)
-    robot = SimulatedRobot.kidnapped(make_world("house"), "bathroom_b", seed=5, camera=CAMERA)
+    robot = SimulatedRobot.kidnapped(make_world("house"), "bathroom_b", seed=34, camera=CAMERA)
     result = localize_actively(Localizer(loaded), robot)
     [place] = [p.id for p in loaded.places if p.room == "bathroom_b"]
     before, last = result.visits[-2].belief, result.visits[-1]
