@@ -71,12 +71,19 @@ arise). Session 43 measured main once on world seeds 95 (K = 1 and 2), 97 and 99
 record seeds one up), wrote its fold of a held way back on seed 93's building (K = 1), its
 doubt of an unreachable one-place room on seed 95's building (K = 1, trial 4) and its doubt
 after a held miss on seed 97's building (K = 1, trial 15), and judged them on seeds 91, 95's
-house and 99 (K = 1). World seeds 101 and up have not been run at all; seed 99 (K = 2), and
-seeds 91 and 93 with two places per room, may judge a change too.
+house and 99 (K = 1). Sessions 44-46 ran world seeds 95 and 101-135 (docs/results.md says
+which, and what each was used for). Session 47 wrote its rule for a frame on a room's place
+looking at seed 133's house (K = 2; trials 4, 8 and 16 traced) and judged it on seed 137
+(record seed 138; K = 2), recorded after the change; with ``--unmapped`` it ran seed 133's
+house without its kitchen, then without its study. World seeds 139 and up have not been run.
+
+``--unmapped ROOM`` records the map without ROOM and kidnaps into ROOM only: the robot is where
+the map has no room, so any ``localized`` answer while it stands there is wrong.
 
     python benchmarks/bench_recorded_maps.py [--worlds building,house] [--places 1,2,3,5]
         [--trials 20] [--record-seed 0] [--world-seed 0] [--drive] [--declared] [--advised
-        [--advised-offset M]] [--every-room] [--first-looks N] [--json out.json]
+        [--advised-offset M]] [--every-room | --unmapped ROOM] [--first-looks N]
+        [--json out.json]
 """
 
 from __future__ import annotations
@@ -134,14 +141,17 @@ def recorded_db(
     declared: bool = False,
     advised_offset_m: float = 0.0,
     drive: bool = False,
+    unmapped: str | None = None,
 ) -> Path:
     """The cached recorded map (recorded if missing), calibrated again by the code being
     measured; ``drive``: recorded on one drive through the doors, the legs stored
     (:func:`~toploc.evaluation.recorded_maps.record_drive`), else room by room;
     ``declared``: then the world's twins (:data:`TWINS`) declared as ``toploc map
     lookalike`` does; ``advised``: then two places at the same two spots of each look-alike
-    pair's rooms, as ``toploc map info`` advises."""
+    pair's rooms, as ``toploc map info`` advises; ``unmapped``: a room of the world left out of
+    the map."""
     suffix = ("-drive" if drive else "") + ("-declared" if declared else "")
+    suffix += f"-no-{unmapped}" if unmapped else ""
     suffix += "-advised" if advised else ""
     suffix += f"-off{advised_offset_m:g}" if advised and advised_offset_m else ""
     name = f"recorded-{world}-w{world_seed}-k{places}-r{record_seed}{suffix}"
@@ -150,7 +160,8 @@ def recorded_db(
     if not db.exists():
         db.parent.mkdir(parents=True, exist_ok=True)
         scene = make_world(world, world_seed)
-        record_map(scene, places, record_seed, db, progress=True, drive=drive)
+        rooms = [room.name for room in scene.rooms if room.name != unmapped]
+        record_map(scene, places, record_seed, db, rooms=rooms, progress=True, drive=drive)
         for pair in TWINS[world] if declared else ():
             calibrate_map(db, declare=pair)
         if advised:
@@ -181,6 +192,7 @@ def args_db(args: argparse.Namespace, world: str, places: int) -> Path:
         args.declared,
         args.advised_offset,
         args.drive,
+        args.unmapped,
     )
 
 
@@ -192,6 +204,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
             print(f"  {trial.describe()}  first {first_outcome(trial)}")
 
     every = tuple(room.name for room in make_world(world, args.world_seed).rooms)
+    into = (args.unmapped,) if args.unmapped else every if args.every_room else None
     run = run_kidnappings(
         world,
         args.trials,
@@ -201,7 +214,7 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         world_seed=args.world_seed,
         progress=False,
         on_trial=show,
-        rooms=every if args.every_room else None,
+        rooms=into,
     )
     totals = run.totals()
     totals["first_outcomes"] = count_outcomes(first_outcome(t) for t in run.trials)
@@ -211,7 +224,13 @@ def run_one(args: argparse.Namespace, world: str, places: int) -> dict[str, Any]
         "counterparts": len(likelihood.counterparts) if likelihood else 0,
     }
     row = {"world": world, "places_per_room": places, "advised": args.advised, "db": str(db)}
-    row["kidnapped_into"] = "every room" if args.every_room else "look-alikes"
+    row["kidnapped_into"] = (
+        f"{args.unmapped} (not in the map)"
+        if args.unmapped
+        else "every room"
+        if args.every_room
+        else "look-alikes"
+    )
     return row | lookalikes | {"run": run.to_json(), "totals": totals}
 
 
@@ -328,6 +347,12 @@ def main() -> None:
         metavar="N",
         help="instead of the loop: N kidnappings into every room, one look each, no drive",
     )
+    parser.add_argument(
+        "--unmapped",
+        metavar="ROOM",
+        help="record the map without ROOM and kidnap into ROOM only: any answer it states "
+        "as localized while the robot is there is wrong",
+    )
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args()
     worlds = args.worlds.split(",")
@@ -338,6 +363,10 @@ def main() -> None:
             )
     if args.trials < 0:
         parser.error(f"--trials must be >= 0, got {args.trials}")
+    for world in worlds if args.unmapped else ():
+        names = [room.name for room in make_world(world, args.world_seed).rooms]
+        if args.unmapped not in names:
+            parser.error(f"--unmapped: world {world!r} has no room {args.unmapped!r}; {names}")
     rows = []
     for world in worlds:
         for places in (int(k) for k in args.places.split(",")):
@@ -361,7 +390,9 @@ def main() -> None:
     print(
         f"recorded maps, world seed {args.world_seed}, record seed {args.record_seed}, "
         f"{args.trials} kidnappings each"
-        f"{' into every room' if args.every_room else ''}, policy {args.policy}"
+        f"{' into every room' if args.every_room and not args.unmapped else ''}"
+        f"{f' into {args.unmapped}, a room the map lacks' if args.unmapped else ''}"
+        f", policy {args.policy}"
         f"{', on one drive' if args.drive else ''}"
         f"{', twins declared' if args.declared else ''}"
         f"{', advised (2 counterpart places per look-alike pair)' if args.advised else ''}"
