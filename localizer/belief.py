@@ -203,11 +203,11 @@ class StateThresholds:
       of them together, cover at least this share of the horizon
       (:data:`localizer.evidence.ALL_ROUND_COVERAGE`), or the frame was taken on one of its
       places; otherwise ``ambiguous`` (the localizer applies it, :meth:`Localizer.belief`).
-      A robot in a doorway, or in the next room
-      looking through the door, sees a room on half the horizon or less: on recorded maps of
-      ``building`` with one place per room, robots just inside an office said ``localized``
-      in the corridor at 0.97 from the corridor's place at 43 and 57 inliers covering 0.51
-      and 0.35 of the horizon (the office's own place, a metre or two away, at 17 and 13).
+      A robot in a doorway, or in the next room looking through the door, sees a room on
+      half the horizon or less: on recorded maps of ``building`` with one place per room,
+      robots just inside an office said ``localized`` in the corridor at 0.97 from the
+      corridor's place at 43 and 57 inliers covering 0.51 and 0.35 of the horizon (the
+      office's own place, a metre or two away, at 17 and 13).
     - ``max_entropy_bits = 1.0``: and the belief is concentrated (e.g. 0.9 on one room and the
       rest over four others is 0.67 bits; a 50/50 split is 1 bit, which is never localized
       anyway because its ratio is 1).
