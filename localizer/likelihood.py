@@ -44,7 +44,7 @@ Pure core: numpy and scipy, no I/O.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -193,17 +193,20 @@ class RatioLikelihood:
         aliased: Sequence[Sequence[int]] = (),
         compared: Sequence[Sequence[int]] = (),
         read: np.ndarray | None = None,
+        pairs: Collection[tuple[int, int]] | None = None,
     ) -> np.ndarray:
         """Likelihood per room (sums to 1) from the best count per room, shape (N,); the rooms
         of each ``aliased`` group of look-alikes (room indices, :mod:`localizer.lookalikes`)
-        are weighed as equally likely, those of each ``compared`` group at most
-        :data:`MAX_TWIN_LOG_RATIO` apart, as their counts ``read`` on counterparts (default:
-        ``room_inliers``) say (:func:`lookalike_log_ratios`)."""
+        are weighed as likely as their look-alikes in it (``pairs``; None: as equally likely),
+        those of each ``compared`` group at most :data:`MAX_TWIN_LOG_RATIO` apart, as their
+        counts ``read`` on counterparts (default: ``room_inliers``) say
+        (:func:`lookalike_log_ratios`)."""
         counts = _check_counts(room_inliers)
         if counts.max() < self.min_inliers:
             return np.full(counts.size, 1.0 / counts.size)
         read_ratios = None if read is None else self.log_ratio(_check_counts(read))
-        return softmax(lookalike_log_ratios(self.log_ratio(counts), aliased, compared, read_ratios))
+        log_ratios = self.log_ratio(counts)
+        return softmax(lookalike_log_ratios(log_ratios, aliased, compared, read_ratios, pairs))
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict (stored in the map)."""
@@ -265,19 +268,35 @@ def lookalike_log_ratios(
     aliased: Sequence[Sequence[int]] = (),
     compared: Sequence[Sequence[int]] = (),
     read: np.ndarray | None = None,
+    pairs: Collection[tuple[int, int]] | None = None,
 ) -> np.ndarray:
-    """Per-room log ratios with each ``aliased`` group of look-alike rooms (room indices) at
-    its best member's: the frame says the group is there as strongly as its best count says,
-    and nothing about which of its rooms (their counts say which has a stored place nearer the
-    robot). In each ``compared`` group each room falls below the group's best by as much as
-    its log ratio ``read`` on counterparts falls below the reading's best (default
-    ``log_ratios``), at most :data:`MAX_TWIN_LOG_RATIO`: the reading says which twin, the best
-    count how strongly the group. Rooms in no group keep their log ratio."""
-    out = np.array(log_ratios, dtype=float)
-    read = out.copy() if read is None else np.asarray(read, dtype=float)
+    """Per-room log ratios with each room of an ``aliased`` group of look-alike rooms (room
+    indices) at the best of its own and its look-alikes' in the group (``pairs``, room indices;
+    None: every two rooms of a group are look-alikes, and each room is at the group's best):
+    the frame says a room is there as strongly as the best count of a room that looks like it,
+    and nothing about which of them (their counts say which has a stored place nearer the
+    robot). A room is lifted by its own look-alikes only, not by theirs: a storage room whose
+    walls share photographs with office_a, and office_a's twin office_b, make one group, but a
+    frame that shows office_b at 326 spread inliers, office_a at 25 and the storage room at 1
+    says nothing for the storage room that office_a's 25 does not (world seed 137's building,
+    two places per room: lifted to the group's best, the storage room kept a third of the
+    belief through every look in office_a, and 4 of 20 robots put there ended ambiguous). In
+    each ``compared`` group each room falls below the group's best by as much as its log ratio
+    ``read`` on counterparts falls below the reading's best (default ``log_ratios``), at most
+    :data:`MAX_TWIN_LOG_RATIO`: the reading says which twin, the best count how strongly the
+    group. Rooms in no group keep their log ratio."""
+    raw = np.array(log_ratios, dtype=float)
+    out = raw.copy()
+    read = raw.copy() if read is None else np.asarray(read, dtype=float)
+    alike = None if pairs is None else {frozenset(pair) for pair in pairs}
     for group in aliased:
-        members = list(group)
-        out[members] = out[members].max()
+        for room in group:
+            lifting = [
+                other
+                for other in group
+                if other == room or alike is None or frozenset((room, other)) in alike
+            ]
+            out[room] = raw[lifting].max()
     for group in compared:
         members = list(group)
         below = np.minimum(read[members].max() - read[members], MAX_TWIN_LOG_RATIO)

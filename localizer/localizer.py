@@ -180,6 +180,8 @@ class Localizer:
         pairs = calibrated.lookalikes if calibrated is not None else ()
         self.lookalike_groups = lookalike_groups(pairs, loaded.rooms)
         self.lookalikes = partners_of(pairs)
+        index = {room: i for i, room in enumerate(loaded.rooms)}
+        self._lookalike_pairs = [(index[a], index[b]) for a, b in pairs if {a, b} <= index.keys()]
         self.doors = partners_of(loaded.edges)  # the rooms each room opens onto
         self.counterparts = partners_of(calibrated.counterparts if calibrated is not None else ())
         # a query is extracted as the map's places were: their equalisation and keypoint cap
@@ -258,7 +260,7 @@ class Localizer:
             min_count=model.min_inliers,
         )
         compared = [group for group in self.lookalike_groups if group not in aliased]
-        return model.from_counts(counts, aliased, compared, read)
+        return model.from_counts(counts, aliased, compared, read, self._lookalike_pairs)
 
     def _through_doors(self, likelihood: np.ndarray, observation: Observation) -> np.ndarray:
         """``likelihood`` with the rooms that a room seen on less than ``min_coverage`` of

@@ -18,9 +18,10 @@ what one gets more of is what only its room shows (the corridor seen through its
 :func:`twin_counts` replaces each look-alike room's count by its count on the best counterpart
 pair the frame verified (one frame moves their odds by at most
 :data:`~localizer.likelihood.MAX_TWIN_LOG_RATIO`); where the frame has none, the group is
-**aliased** and its rooms are weighed as equally likely
-(:func:`localizer.likelihood.lookalike_log_ratios`): the counts say nothing about which twin it
-is, and the active loop must drive to a counterpart place. Counterparts recorded by hand stand
+**aliased** and each of its rooms is weighed as likely as the likeliest of its own look-alikes
+(:func:`localizer.likelihood.lookalike_log_ratios`; in a group of twins, all equally): the
+counts say nothing about which twin it is, and the active loop must drive to a counterpart
+place or check a room by a recorded route. Counterparts recorded by hand stand
 a few decimetres apart; the localizer reads them only where the robot homed to one of them
 (:meth:`localizer.localizer.Localizer.frame_likelihood`).
 

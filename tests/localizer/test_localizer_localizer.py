@@ -432,3 +432,30 @@ def test_counterparts_that_stand_apart_are_read_where_the_robot_homed_to_one():
     localizer = Localizer(twin_offices_map())
     a, b = localizer.frame_likelihood(frame_on(localizer, {2: 60, 4: 120}, at_place=2))
     assert b > 2 * a
+
+
+def office_twins_and_storage_map() -> LoadedMap:
+    """Places 1 (office_a), 2 (office_b), 3 (storage); office_a looks like office_b and like
+    storage (a wall of photographs they share), office_b not like storage: one group."""
+    rng = np.random.default_rng(2)
+    images = [rng.integers(0, 256, (64, 256), dtype=np.uint8) for _ in range(3)]
+    fingerprints = [extract_with_camera(image, CameraSpec(), "sift") for image in images]
+    rooms = ["office_a", "office_b", "storage"]
+    table = FingerprintTable.stack("sift", [1, 2, 3], rooms, fingerprints)
+    places = tuple(Place(i, room) for i, room in zip([1, 2, 3], rooms, strict=True))
+    pairs = (("office_a", "office_b"), ("office_a", "storage"))
+    model = RatioLikelihood(lookalikes=pairs).to_json()
+    snapshot = MapSnapshot(Path("m"), table, places, tuple(rooms), (), model)
+    return LoadedMap.from_snapshot(snapshot)
+
+
+def test_a_room_is_as_likely_as_its_own_look_alikes_show_not_as_its_group():
+    # the robot stands where office_b's place stood, in office_a or office_b: the storage room,
+    # which looks like office_a only, gains only what office_a's count gives it
+    localizer = Localizer(office_twins_and_storage_map())
+    assert localizer.lookalike_groups == ((0, 1, 2),)
+    a, b, storage = localizer.frame_likelihood(frame_on(localizer, {1: 25, 2: 326, 3: 1}))
+    assert a == pytest.approx(b)
+    log_ratio = localizer.likelihood.log_ratio(np.array([25.0, 326.0]))
+    assert storage / a == pytest.approx(math.exp(log_ratio[0] - log_ratio[1]))
+    assert storage < a / 100

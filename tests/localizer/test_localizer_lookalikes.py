@@ -87,6 +87,26 @@ def test_an_aliased_group_is_as_likely_as_its_best_room_and_no_more(logs):
     assert out[1] == logs[1]
 
 
+def test_a_room_is_lifted_by_its_own_look_alikes_not_by_theirs():
+    # office_a ~ office_b (twins) and office_a ~ kitchen (photos on a shared wall): one group,
+    # but the kitchen does not look like what office_b's place shows
+    model = RatioLikelihood()
+    raw = model.log_ratio(np.array([0.0, 25.0, 326.0, 1.0, 0.0, 0.0]))
+    pairs = [(1, 2), (1, 3)]
+    out = lookalike_log_ratios(raw, ((1, 2, 3),), pairs=pairs)
+    assert out[1] == out[2] == raw[2]  # the twins: as likely as the twin that shows most
+    assert out[3] == raw[1]  # the kitchen: as likely as office_a, its look-alike, shows
+    assert out[2] - out[3] > math.log(100)
+
+
+@given(logs=st.lists(st.floats(-25, 25), min_size=4, max_size=4))
+def test_a_group_whose_rooms_are_all_look_alikes_is_at_its_best_rooms(logs):
+    pairs = [(0, 2), (0, 3), (2, 3)]
+    assert list(lookalike_log_ratios(np.array(logs), ((0, 2, 3),), pairs=pairs)) == list(
+        lookalike_log_ratios(np.array(logs), ((0, 2, 3),))
+    )
+
+
 def test_twins_are_read_on_the_counterpart_pair_the_frame_verified():
     # the robot is nearest office_b's place 12, which has no counterpart; office_a's 3 and
     # office_b's 13 stand at one spot of their frames and the frame verified both
