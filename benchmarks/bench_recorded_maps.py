@@ -75,7 +75,12 @@ house and 99 (K = 1). Sessions 44-46 ran world seeds 95 and 101-135 (docs/result
 which, and what each was used for). Session 47 wrote its rule for a frame on a room's place
 looking at seed 133's house (K = 2; trials 4, 8 and 16 traced) and judged it on seed 137
 (record seed 138; K = 2), recorded after the change; with ``--unmapped`` it ran seed 133's
-house without its kitchen, then without its study. World seeds 139 and up have not been run.
+house without its kitchen, then without its study. Session 48 wrote its lift of a look-alike
+by its own look-alikes only looking at seed 137's building (K = 2; trials 4, 6, 10 and 18
+traced), measured it on seed 129's building (K = 1), and judged it on seeds 139 (building,
+K = 2), 145 (building, K = 2) and 157 (building, K = 2; house, K = 1), recorded for the first
+time; of seeds 141-161 it recorded all four maps (K = 1, 2) and chose those whose look-alike
+groups are not all pairs, before running any. World seeds 163 and up have not been run.
 
 ``--unmapped ROOM`` records the map without ROOM and kidnaps into ROOM only: the robot is where
 the map has no room, so any ``localized`` answer while it stands there is wrong.

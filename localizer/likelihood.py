@@ -279,8 +279,9 @@ def lookalike_log_ratios(
     walls share photographs with office_a, and office_a's twin office_b, make one group, but a
     frame that shows office_b at 326 spread inliers, office_a at 25 and the storage room at 1
     says nothing for the storage room that office_a's 25 does not (world seed 137's building,
-    two places per room: lifted to the group's best, the storage room kept a third of the
-    belief through every look in office_a, and 4 of 20 robots put there ended ambiguous). In
+    two places per room: lifted to the group's best, the storage room, which robots in
+    office_a could neither reach nor check by a route, held 0.10-0.38 of the belief to the
+    end, and 4 of 20 robots put in office_a ended ambiguous). In
     each ``compared`` group each room falls below the group's best by as much as its log ratio
     ``read`` on counterparts falls below the reading's best (default ``log_ratios``), at most
     :data:`MAX_TWIN_LOG_RATIO`: the reading says which twin, the best count how strongly the
